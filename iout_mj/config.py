@@ -1,0 +1,391 @@
+"""Typed, frozen configuration: paper defaults, presets, validation, YAML/JSON load and save."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+Point = tuple[float, float]
+
+# Node layouts of the authors' public code (DESIGN.md section 4), metres.
+PAPER_LAYOUTS: dict[int, tuple[Point, ...]] = {
+    7: ((100, 100), (800, 500), (500, 900), (300, 700), (500, 200), (900, 200), (200, 400)),
+    13: (
+        (100, 100), (800, 500), (500, 900), (300, 700), (200, 400), (900, 200), (500, 200),
+        (700, 800), (800, 200), (700, 300), (700, 100), (300, 100), (900, 700),
+    ),
+}
+# Start positions: the first two from the authors' code, the others continue the pattern.
+DEFAULT_STARTS: tuple[Point, ...] = ((50, 50), (50, 150), (150, 50), (150, 150))
+MAX_AUVS = 4
+MIN_NODES, MAX_NODES = 2, 30
+
+
+class ConfigError(ValueError):
+    """A configuration value, key or file is invalid; the message says what is accepted."""
+
+
+def _require(ok: bool, name: str, value: Any, accepted: str) -> None:
+    if not ok:
+        raise ConfigError(f"{name}={value!r} is invalid: accepted {accepted}")
+
+
+def _positive(obj: Any, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        _require(math.isfinite(value) and value > 0, name, value, "a finite number > 0")
+
+
+def _fraction(obj: Any, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        _require(0 < value <= 1, name, value, "a number in (0, 1]")
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Vehicle motion and propulsion (paper Table I, plus battery from the authors' code)."""
+
+    v_max_mps: float = 4.0
+    drag_coefficient: float = 0.006
+    """C_d, dimensionless, referred to the wetted area."""
+    wetted_area_m2: float = 3.0
+    prop_efficiency: float = 0.7
+    water_density_kgpm3: float = 1000.0
+    hotel_power_w: float = 40.0
+    dtheta_max_deg: float = 25.0
+    dv_max_mps: float = 0.4
+    heading_levels: int = 11
+    speed_levels: int = 7
+    initial_speed_mps: float = 1.0
+    battery_j: float = 2.0e6
+
+    def __post_init__(self) -> None:
+        _positive(self, "v_max_mps", "drag_coefficient", "wetted_area_m2",
+                  "water_density_kgpm3", "dtheta_max_deg", "dv_max_mps", "battery_j")
+        _fraction(self, "prop_efficiency")
+        _require(self.hotel_power_w >= 0, "hotel_power_w", self.hotel_power_w, "a number >= 0")
+        for name in ("heading_levels", "speed_levels"):
+            value = getattr(self, name)
+            _require(value >= 3 and value % 2 == 1, name, value,
+                     "an odd integer >= 3 (so that the middle level is 'no change')")
+        _require(0 <= self.initial_speed_mps <= self.v_max_mps, "initial_speed_mps",
+                 self.initial_speed_mps, f"a speed in [0, v_max_mps={self.v_max_mps}]")
+
+    @property
+    def drag_factor_nspm2(self) -> float:
+        """rho * C_d * S / 2 in N s^2/m^2: steady surge drag is this times v^2."""
+        return 0.5 * self.water_density_kgpm3 * self.drag_coefficient * self.wetted_area_m2
+
+
+@dataclass(frozen=True)
+class AcousticsConfig:
+    """Acoustic energy transfer and uplink (paper Table II, open values from the authors' code)."""
+
+    f_wet_khz: float = 70.0
+    f_data_khz: float = 50.0
+    p_tx_w: float = 5.0
+    """Electrical power of the AUV's AET projector."""
+    eta_tx: float = 0.7
+    di_tx_db: float = 10.0
+    di_rx_db: float = 10.0
+    spreading_factor: float = 1.5
+    rvs_db: float = -150.0
+    """Receiving voltage sensitivity, dB re 1 V/uPa."""
+    load_resistance_ohm: float = 125.0
+    n_hydrophones: int = 4
+    eta_harv: float = 0.7
+    bandwidth_hz: float = 1000.0
+    data_rate_bps: float = 12000.0
+    charging_s: float = 25.0
+    data_s: float = 25.0
+    noise_model: str = "flat"
+    """'flat' (a constant spectral level) or 'wenz' (turbulence, shipping, wind, thermal)."""
+    noise_level_db: float = 40.0
+    """Flat ambient noise spectral level, dB re 1 uPa^2/Hz."""
+    shipping_activity: float = 0.5
+    """Wenz model shipping activity in [0, 1]."""
+    wind_speed_mps: float = 0.0
+    """Wenz model surface wind speed."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "f_wet_khz", "f_data_khz", "p_tx_w", "spreading_factor",
+                  "load_resistance_ohm", "bandwidth_hz", "data_rate_bps", "charging_s", "data_s")
+        _fraction(self, "eta_tx", "eta_harv")
+        _require(self.n_hydrophones >= 1, "n_hydrophones", self.n_hydrophones, "an integer >= 1")
+        _require(self.noise_model in ("flat", "wenz"), "noise_model", self.noise_model,
+                 "'flat' or 'wenz'")
+        _require(0 <= self.shipping_activity <= 1, "shipping_activity", self.shipping_activity,
+                 "a number in [0, 1]")
+        _require(self.wind_speed_mps >= 0, "wind_speed_mps", self.wind_speed_mps, "a number >= 0")
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Sensor-node state rules (paper section III-A; open values from the authors' code)."""
+
+    k_reset: int = 3
+    aoi_max: float = 50.0
+    node_initial_energy_j: float = 0.1
+
+    def __post_init__(self) -> None:
+        _require(self.k_reset >= 1, "k_reset", self.k_reset, "an integer >= 1")
+        _require(self.aoi_max >= 1, "aoi_max", self.aoi_max, "a number >= 1")
+        _require(self.node_initial_energy_j >= 0, "node_initial_energy_j",
+                 self.node_initial_energy_j, "a number >= 0")
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights of the paper's reward equation; values from the authors' code except where noted."""
+
+    docking_progress_per_m: float = 0.01
+    """alpha_g; the paper gives no value: 0.01 makes a full approach worth about 10."""
+    aoi: float = 0.1
+    fairness: float = 2.0
+    fairness_min_deliveries: int = 3
+    """The fairness term applies once more than this many deliveries happened."""
+    boundary: float = 20.0
+    stall: float = 1.0
+    stall_distance_m: float = 5.0
+    """A slot with less displacement than this (and not docked) counts as a stall."""
+    energy_margin: float = 2.0
+    margin_epsilon_j: float = 1e-6
+    infeasible_uplink: float = 0.02
+    collision: float = 4.0
+    """alpha_c."""
+    collision_sigma_m: float = 20.0
+    safety_distance_m: float = 100.0
+    """d_th."""
+    dock_first_entry: float = 60.0
+    dock_all: float = 10.0
+    fairness_lambda: float = 1.0
+    """lambda_f of the objective P1 (not a reward weight; used for the reported objective)."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            _require(math.isfinite(value) and value >= 0, f.name, value, "a finite number >= 0")
+        _positive(self, "collision_sigma_m", "margin_epsilon_j")
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """MuJoCo model settings of the physics backend."""
+
+    timestep_s: float = 0.1
+    """Chosen by `iout-mj validate-energy` timestep convergence (see README)."""
+    current_mps: Point = (0.0, 0.0)
+    """Uniform ocean current (MuJoCo `wind`), world frame."""
+    current_jitter_mps: float = 0.0
+    """Per-episode random current of up to this speed, drawn from the task RNG."""
+
+    def __post_init__(self) -> None:
+        _require(0 < self.timestep_s <= 0.5, "timestep_s", self.timestep_s, "a number in (0, 0.5]")
+        _require(self.current_jitter_mps >= 0, "current_jitter_mps", self.current_jitter_mps,
+                 "a number >= 0")
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """Geometry and horizon of a mission."""
+
+    area_m: Point = (1000.0, 1000.0)
+    nodes_m: tuple[Point, ...] = PAPER_LAYOUTS[7]
+    n_auvs: int = 2
+    starts_m: tuple[Point, ...] = DEFAULT_STARTS
+    """Start positions; AUV i starts at starts_m[i]."""
+    start_heading_rad: float = 0.0
+    dock_center_m: Point = (830.0, 830.0)
+    dock_radius_m: float = 70.0
+    slot_s: float = 25.0
+    horizon_slots: int = 55
+    start_jitter_m: float = 0.0
+    """Uniform random start offset of up to this many metres per axis (task RNG)."""
+    start_heading_jitter_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        ax, ay = self.area_m
+        _require(ax > 0 and ay > 0, "area_m", self.area_m, "two sides > 0 m")
+        _require(1 <= self.n_auvs <= MAX_AUVS, "n_auvs", self.n_auvs,
+                 f"an integer from 1 to {MAX_AUVS}")
+        k = len(self.nodes_m)
+        _require(MIN_NODES <= k <= MAX_NODES, "nodes_m", f"{k} nodes",
+                 f"{MIN_NODES} to {MAX_NODES} nodes")
+        for i, (x, y) in enumerate(self.nodes_m):
+            _require(0 <= x <= ax and 0 <= y <= ay, f"nodes_m[{i}]", (x, y), "a point inside area_m")
+        _require(len(self.starts_m) >= self.n_auvs, "starts_m", self.starts_m,
+                 f"at least n_auvs={self.n_auvs} points")
+        for i, (x, y) in enumerate(self.starts_m[: self.n_auvs]):
+            _require(0 < x < ax and 0 < y < ay, f"starts_m[{i}]", (x, y),
+                     "a point strictly inside area_m")
+        dx, dy = self.dock_center_m
+        r = self.dock_radius_m
+        _require(r > 0, "dock_radius_m", r, "a radius > 0 m")
+        _require(r <= dx <= ax - r and r <= dy <= ay - r, "dock_center_m", self.dock_center_m,
+                 "a centre whose dock circle lies inside area_m")
+        _positive(self, "slot_s")
+        _require(self.horizon_slots >= 1, "horizon_slots", self.horizon_slots, "an integer >= 1")
+        _require(self.start_jitter_m >= 0, "start_jitter_m", self.start_jitter_m, "a number >= 0")
+        _require(self.start_heading_jitter_deg >= 0, "start_heading_jitter_deg",
+                 self.start_heading_jitter_deg, "a number >= 0")
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.nodes_m)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything a mission needs; each part has the paper's defaults."""
+
+    scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    acoustics: AcousticsConfig = field(default_factory=AcousticsConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+
+    def replace(self, **sections: Any) -> Config:
+        """A copy with some sections replaced, e.g. `cfg.replace(scenario=...)`."""
+        return dataclasses.replace(self, **sections)
+
+    def to_dict(self) -> dict[str, Any]:
+        return _to_plain(dataclasses.asdict(self))
+
+    def save(self, path: str | Path) -> None:
+        """Write YAML (.yaml/.yml) or JSON (.json)."""
+        path = Path(path)
+        data = self.to_dict()
+        if path.suffix == ".json":
+            path.write_text(json.dumps(data, indent=2) + "\n")
+        elif path.suffix in (".yaml", ".yml"):
+            path.write_text(yaml.safe_dump(data, sort_keys=False))
+        else:
+            raise ConfigError(f"config file {path}: accepted suffixes .yaml, .yml, .json")
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Config:
+        return _build(cls, data, "config")
+
+    @classmethod
+    def load(cls, path: str | Path) -> Config:
+        """Read a YAML or JSON file written by `save` (or by hand; missing keys take defaults)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"config file {path} does not exist")
+        text = path.read_text()
+        try:
+            data = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
+        except (json.JSONDecodeError, yaml.YAMLError) as exc:
+            raise ConfigError(f"config file {path} is not valid YAML/JSON: {exc}") from exc
+        return cls.from_dict({} if data is None else data)
+
+
+def _to_plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _to_plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_to_plain(v) for v in value]
+    return value
+
+
+def _convert(tp: Any, value: Any, name: str) -> Any:
+    """Check `value` against the annotation `tp` and convert lists to tuples."""
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, name)
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{name}={value!r} has the wrong type: accepted a list")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(args[0], v, f"{name}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{name}={value!r} is invalid: accepted a list of {len(args)} values")
+        return tuple(_convert(a, v, f"{name}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+    if origin in (typing.Union, types.UnionType):
+        raise ConfigError(f"{name}: union types are not supported in configs")
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{name}={value!r} has the wrong type: accepted a number")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{name}={value!r} has the wrong type: accepted an integer")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{name}={value!r} has the wrong type: accepted a string")
+        return value
+    raise ConfigError(f"{name}: unsupported field type {tp}")
+
+
+def _build(cls: Any, data: Any, name: str) -> Any:
+    if isinstance(data, cls):
+        return data
+    if not isinstance(data, dict):
+        raise ConfigError(f"{name}={data!r} has the wrong type: accepted a mapping")
+    hints = typing.get_type_hints(cls)
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ConfigError(f"{name}: unknown key(s) {unknown}; accepted keys {sorted(known)}")
+    kwargs = {k: _convert(hints[k], v, f"{name}.{k}") for k, v in data.items()}
+    return cls(**kwargs)
+
+
+def random_layout(n_nodes: int, seed: int, scenario: ScenarioConfig | None = None,
+                  min_spacing_m: float = 80.0, margin_m: float = 50.0) -> tuple[Point, ...]:
+    """Seeded node layout inside the area, `min_spacing_m` apart and outside the dock zone."""
+    _require(MIN_NODES <= n_nodes <= MAX_NODES, "n_nodes", n_nodes,
+             f"an integer from {MIN_NODES} to {MAX_NODES}")
+    sc = scenario or ScenarioConfig()
+    rng = np.random.default_rng(seed)
+    lo = np.array([margin_m, margin_m])
+    hi = np.asarray(sc.area_m) - margin_m
+    dock = np.asarray(sc.dock_center_m)
+    points: list[np.ndarray] = []
+    for _ in range(100_000):
+        p = rng.uniform(lo, hi)
+        if np.linalg.norm(p - dock) < sc.dock_radius_m + min_spacing_m:
+            continue
+        if all(np.linalg.norm(p - q) >= min_spacing_m for q in points):
+            points.append(p)
+            if len(points) == n_nodes:
+                return tuple((round(float(x), 1), round(float(y), 1)) for x, y in points)
+    raise ConfigError(f"cannot place {n_nodes} nodes {min_spacing_m} m apart in area {sc.area_m}")
+
+
+def make_config(n_auvs: int = 2, n_nodes: int = 7, layout: str = "paper", seed: int = 0,
+                base: Config | None = None) -> Config:
+    """A config with `n_auvs` AUVs and a node layout.
+
+    Args:
+        n_auvs: number of AUVs (1 to 4).
+        n_nodes: number of nodes (2 to 30).
+        layout: "paper" (the paper's 7- or 13-node layout) or "random" (seeded by `seed`).
+        seed: seed of a random layout.
+        base: config whose other sections are kept (defaults: the paper's).
+    """
+    base = base or Config()
+    if layout == "paper":
+        _require(n_nodes in PAPER_LAYOUTS, "n_nodes", n_nodes,
+                 f"{sorted(PAPER_LAYOUTS)} with layout='paper' (use layout='random' otherwise)")
+        nodes = PAPER_LAYOUTS[n_nodes]
+    elif layout == "random":
+        nodes = random_layout(n_nodes, seed, base.scenario)
+    else:
+        raise ConfigError(f"layout={layout!r} is invalid: accepted 'paper' or 'random'")
+    nodes = tuple((float(x), float(y)) for x, y in nodes)
+    scenario = dataclasses.replace(base.scenario, n_auvs=n_auvs, nodes_m=nodes)
+    return base.replace(scenario=scenario)

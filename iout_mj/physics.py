@@ -1,0 +1,161 @@
+"""dm_control Physics for N AUVs: named accessors, commands, and exact actuator-power metering.
+
+`step(nstep)` runs all substeps in C through `mujoco.rollout` (no Python per substep) and
+keeps each substep's sensor data, so the mechanical power |force x velocity| of every
+actuator is integrated over every substep. The same call leaves the substep trajectory
+(`substep_qpos`) for smooth video frames.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+from dm_control.mujoco import engine, wrapper
+from mujoco import rollout
+from numpy.typing import NDArray
+
+from iout_mj import names, vehicle
+from iout_mj.config import Config
+
+FloatArray = NDArray[np.float64]
+_STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
+
+
+def _sensor_adr(model: mujoco.MjModel, name: str) -> int:
+    return int(model.sensor_adr[model.sensor(name).id])
+
+
+class AUVPhysics(engine.Physics):
+    """Physics of one scene built by `vehicle.build_scene`."""
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> AUVPhysics:
+        physics = cls.from_model(wrapper.MjModel(vehicle.build_model(cfg)))
+        physics.bind(cfg)
+        return physics
+
+    def bind(self, cfg: Config) -> None:
+        """Look up every index once; per-step code never looks up names."""
+        m = self.model.ptr
+        n = cfg.scenario.n_auvs
+        self.cfg = cfg
+        self.n_auvs = n
+        self.dt_s = float(m.opt.timestep)
+
+        def joint(i: int, j: str) -> int:
+            return m.joint(names.auv_prefix(i) + j).id
+
+        self._qx = np.array([m.jnt_qposadr[joint(i, names.JOINT_X)] for i in range(n)])
+        self._qy = np.array([m.jnt_qposadr[joint(i, names.JOINT_Y)] for i in range(n)])
+        self._qyaw = np.array([m.jnt_qposadr[joint(i, names.JOINT_YAW)] for i in range(n)])
+        self._vx = np.array([m.jnt_dofadr[joint(i, names.JOINT_X)] for i in range(n)])
+        self._vy = np.array([m.jnt_dofadr[joint(i, names.JOINT_Y)] for i in range(n)])
+        self._vyaw = np.array([m.jnt_dofadr[joint(i, names.JOINT_YAW)] for i in range(n)])
+        self._thrust = np.array([m.actuator(names.auv_prefix(i) + names.THRUST).id
+                                 for i in range(n)])
+        self._yaw_act = np.array([m.actuator(names.auv_prefix(i) + names.YAW_ACTUATOR).id
+                                  for i in range(n)])
+        pairs = [(names.THRUST + "_force", names.THRUST + "_velocity"),
+                 (names.YAW_ACTUATOR + "_force", names.YAW_ACTUATOR + "_velocity")]
+        self._power_sensors = np.array(
+            [[[_sensor_adr(m, names.auv_prefix(i) + f), _sensor_adr(m, names.auv_prefix(i) + v)]
+              for f, v in pairs] for i in range(n)]
+        )  # (N, 2 actuators, 2: force/velocity)
+        self._nstate = mujoco.mj_stateSize(m, _STATE_SPEC)
+        self._state0 = np.empty((1, self._nstate))
+        self._rollout = rollout.Rollout(nthread=0)
+        self._buffers: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self.mech_energy_j = np.zeros((n, 2))
+        """Integrated |force x velocity| per AUV: column 0 surge thrust, column 1 yaw."""
+        self.substep_qpos: FloatArray = np.zeros((0, m.nq))
+
+    # ------------------------------------------------------------------ accessors
+    def positions_m(self) -> FloatArray:
+        q = self.data.qpos
+        return np.stack([q[self._qx], q[self._qy]], axis=1)
+
+    def yaw_rad(self) -> FloatArray:
+        """Unwrapped yaw angles (continuous across +-pi)."""
+        return np.array(self.data.qpos[self._qyaw])
+
+    def headings_rad(self) -> FloatArray:
+        """Headings wrapped to (-pi, pi]."""
+        return wrap_angle(self.yaw_rad())
+
+    def velocities_mps(self) -> FloatArray:
+        v = self.data.qvel
+        return np.stack([v[self._vx], v[self._vy]], axis=1)
+
+    def speeds_mps(self) -> FloatArray:
+        """Measured speed over ground."""
+        return np.linalg.norm(self.velocities_mps(), axis=1)
+
+    def surge_mps(self) -> FloatArray:
+        """Measured speed along the hull axis."""
+        yaw = self.yaw_rad()
+        v = self.velocities_mps()
+        return np.cos(yaw) * v[:, 0] + np.sin(yaw) * v[:, 1]
+
+    def yaw_rate_rps(self) -> FloatArray:
+        return np.array(self.data.qvel[self._vyaw])
+
+    def actuator_forces(self) -> FloatArray:
+        """(N, 2): surge thrust in N and yaw torque in N m."""
+        f = self.data.actuator_force
+        return np.stack([f[self._thrust], f[self._yaw_act]], axis=1)
+
+    # ------------------------------------------------------------------ commands
+    def set_commands(self, yaw_setpoint_rad: FloatArray, speed_setpoint_mps: FloatArray) -> None:
+        """Heading (unwrapped) and speed setpoints for the low-level servos."""
+        ctrl = self.data.ctrl
+        ctrl[self._yaw_act] = yaw_setpoint_rad
+        ctrl[self._thrust] = vehicle.thrust_command(np.asarray(speed_setpoint_mps),
+                                                    self.cfg.motion)
+
+    def set_poses(self, xy_m: FloatArray, yaw_rad: FloatArray, speed_mps: FloatArray) -> None:
+        """Place every AUV, moving at `speed_mps` along its heading, and zero the meters."""
+        q, v = self.data.qpos, self.data.qvel
+        q[self._qx], q[self._qy], q[self._qyaw] = xy_m[:, 0], xy_m[:, 1], yaw_rad
+        v[self._vx] = speed_mps * np.cos(yaw_rad)
+        v[self._vy] = speed_mps * np.sin(yaw_rad)
+        v[self._vyaw] = 0.0
+        self.set_commands(yaw_rad, speed_mps)
+        self.mech_energy_j[:] = 0.0
+        self.substep_qpos = np.zeros((0, self.model.ptr.nq))
+        mujoco.mj_forward(self.model.ptr, self.data.ptr)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, nstep: int = 1) -> None:
+        """Advance `nstep` substeps in C and integrate actuator power over each of them."""
+        m, d = self.model.ptr, self.data.ptr
+        if nstep not in self._buffers:
+            self._buffers[nstep] = (np.empty((1, nstep, m.nu)),
+                                    np.empty((1, nstep, self._nstate)),
+                                    np.empty((1, nstep, m.nsensordata)))
+        ctrl, state, sensordata = self._buffers[nstep]
+        ctrl[:] = d.ctrl
+        mujoco.mj_getState(m, d, self._state0[0], _STATE_SPEC)
+        with self.check_invalid_state():
+            self._rollout.rollout([m], [d], self._state0, ctrl, nstep=nstep, skip_checks=True,
+                                  state=state, sensordata=sensordata)
+        sd = sensordata[0]
+        force = sd[:, self._power_sensors[..., 0]]
+        velocity = sd[:, self._power_sensors[..., 1]]
+        self.mech_energy_j += np.abs(force * velocity).sum(axis=0) * self.dt_s
+        self.substep_qpos = state[0, :, 1 : 1 + m.nq]
+
+    def __getstate__(self) -> Any:
+        raise TypeError("AUVPhysics is not picklable; pickle the environment (it rebuilds).")
+
+    def free(self) -> None:
+        if getattr(self, "_rollout", None) is not None:
+            self._rollout.close()
+            self._rollout = None
+        super().free()
+
+
+def wrap_angle(angle_rad: Any) -> Any:
+    """Wrap angles to (-pi, pi]."""
+    return np.pi - np.mod(np.pi - np.asarray(angle_rad), 2 * np.pi)

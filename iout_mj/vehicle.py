@@ -1,0 +1,115 @@
+"""Builds the MuJoCo scene: N AUVs from assets/auv.xml, nodes, dock and arena, from a Config.
+
+The vehicle (assets/auv.xml), with its sources:
+
+- Hull: 3.0 m x 0.32 m torpedo, rigid mass 240 kg (neutrally buoyant: its displaced volume,
+  pi 0.16^2 3.0 m^3 = 0.241 m^3 of water). Gravity and buoyancy balance; motion is planar.
+- Surge drag: MuJoCo's ellipsoid fluid model on a 1.5 x 0.16 x 0.16 m ellipsoid. Its blunt-drag
+  force for flow along the axis is C_blunt * rho * pi r_y r_z * v^2 (verified in the tests), so
+  C_blunt is set here to give rho*C_d*S/2 = 9 N s^2/m^2 with the paper's numbers.
+- Sway and yaw: the same hull gives about 84 N s^2/m^2 of cross-flow drag (9x surge) and an
+  angular drag; tail fins add Kutta lift, which keeps the hull directionally stable.
+- Added mass (MuJoCo computes but does not apply it): the ratios of the REMUS 100 model of
+  Prestero (2001, MIT thesis, Table 4.x: X_udot = -0.93 kg for m = 30.5 kg, Y_vdot = -35.5 kg,
+  N_rdot = -4.88 kg m^2 for I_zz = 3.45 kg m^2) scaled to this hull: surge 3.0 % (7.3 kg), yaw
+  141 % of I_zz (256 kg m^2 on top of 181 kg m^2). Surge added mass is in the body mass, yaw
+  added inertia in I_zz. Sway added mass (116 %, 279 kg) cannot be represented with world-axis
+  planar joints and is not modelled: it would slow sideslip build-up in turns.
+- Surge propeller: speed servo F = k_v (ctrl - u) with the drag feedforward in ctrl (set by the
+  task once per slot), saturated at rho*C_d*S/2 * V_max^2 so the vehicle reaches V_max and no
+  more. Yaw: heading servo (kp, kv) on the yaw joint, saturated at 150 N m.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from iout_mj import names
+from iout_mj.config import Config, MotionConfig
+
+AUV_DEPTH_M = -10.0
+SEABED_DEPTH_M = -30.0
+NODE_RADIUS_M = 8.0
+THRUST_GAIN_NSPM = 2000.0
+"""k_v of the surge speed servo, N per (m/s) of speed error."""
+
+
+def hull_blunt_coefficient(motion: MotionConfig, spec: mujoco.MjSpec) -> float:
+    """C_blunt of the hull ellipsoid that makes surge drag rho*C_d*S/2 * v^2."""
+    hull = spec.geom(names.HULL_DRAG_GEOM)
+    r_y, r_z = hull.size[1], hull.size[2]
+    return motion.drag_factor_nspm2 / (motion.water_density_kgpm3 * np.pi * r_y * r_z)
+
+
+def max_thrust_n(motion: MotionConfig) -> float:
+    """Thrust limit: the drag at V_max."""
+    return motion.drag_factor_nspm2 * motion.v_max_mps**2
+
+
+def thrust_command(speed_mps: np.ndarray, motion: MotionConfig) -> np.ndarray:
+    """Servo input for a speed setpoint: setpoint plus drag feedforward / k_v."""
+    return speed_mps + motion.drag_factor_nspm2 * np.square(speed_mps) / THRUST_GAIN_NSPM
+
+
+def auv_spec(motion: MotionConfig) -> mujoco.MjSpec:
+    """The AUV alone, calibrated to `motion`."""
+    spec = mujoco.MjSpec.from_file(str(names.AUV_XML))
+    hull = spec.geom(names.HULL_DRAG_GEOM)
+    coefs = list(hull.fluid_coefs)
+    coefs[0] = hull_blunt_coefficient(motion, spec)
+    hull.fluid_coefs = coefs
+    thrust = spec.actuator(names.THRUST)
+    f_max = max_thrust_n(motion)
+    thrust.forcerange = [-f_max, f_max]
+    thrust.ctrlrange = [0.0, float(thrust_command(np.array(motion.v_max_mps), motion))]
+    thrust.gainprm[0] = THRUST_GAIN_NSPM
+    thrust.biasprm[2] = -THRUST_GAIN_NSPM
+    return spec
+
+
+def _add_markers(spec: mujoco.MjSpec, cfg: Config) -> None:
+    sc = cfg.scenario
+    world = spec.worldbody
+    ax, ay = sc.area_m
+    seabed = spec.geom(names.SEABED_GEOM)
+    seabed.pos = [ax / 2, ay / 2, SEABED_DEPTH_M]
+    seabed.size = [ax / 2 + 20, ay / 2 + 20, 1]
+    for k, (x, y) in enumerate(sc.nodes_m):
+        body = world.add_body(name=names.node_name(k), pos=[x, y, SEABED_DEPTH_M])
+        body.add_geom(name=f"{names.node_name(k)}_marker", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                      size=[NODE_RADIUS_M, 2.0, 0], pos=[0, 0, 2.0], rgba=[0.2, 0.6, 1, 1],
+                      contype=0, conaffinity=0, fluid_ellipsoid=0)
+        body.add_site(name=f"{names.node_name(k)}_antenna", pos=[0, 0, 4.0], size=[0.5, 0, 0])
+    dx, dy = sc.dock_center_m
+    world.add_geom(name=names.DOCK_GEOM, type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                   size=[sc.dock_radius_m, 0.2, 0], pos=[dx, dy, SEABED_DEPTH_M + 0.5],
+                   material="dock", contype=0, conaffinity=0)
+    edges = [((ax / 2, 0), (ax / 2, 1)), ((ax / 2, ay), (ax / 2, 1)),
+             ((0, ay / 2), (1, ay / 2)), ((ax, ay / 2), (1, ay / 2))]
+    for i, ((x, y), (hx, hy)) in enumerate(edges):
+        world.add_geom(name=f"boundary{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=[hx, hy, 0.5],
+                       pos=[x, y, SEABED_DEPTH_M + 0.5], material="boundary",
+                       contype=0, conaffinity=0)
+    # Top-down camera over the area's centre, high enough to see all of it at fovy = 45 deg.
+    height = 0.5 * max(ax, ay) / np.tan(np.radians(22.5)) * 1.08
+    world.add_camera(name=names.TOP_CAMERA, pos=[ax / 2, ay / 2, SEABED_DEPTH_M + height],
+                     xyaxes=[1, 0, 0, 0, 1, 0], fovy=45)
+
+
+def build_scene(cfg: Config) -> mujoco.MjSpec:
+    """The full scene for `cfg`: arena, markers, and N AUVs at their start positions."""
+    spec = mujoco.MjSpec.from_file(str(names.ARENA_XML))
+    spec.option.timestep = cfg.physics.timestep_s
+    spec.option.density = cfg.motion.water_density_kgpm3
+    spec.option.wind = [*cfg.physics.current_mps, 0.0]
+    _add_markers(spec, cfg)
+    for i in range(cfg.scenario.n_auvs):
+        frame = spec.worldbody.add_frame(pos=[0.0, 0.0, AUV_DEPTH_M])
+        spec.attach(auv_spec(cfg.motion), prefix=names.auv_prefix(i), frame=frame)
+    return spec
+
+
+def build_model(cfg: Config) -> mujoco.MjModel:
+    """Compiled model of `build_scene(cfg)`; AUVs sit at the origin until the task places them."""
+    return build_scene(cfg).compile()
