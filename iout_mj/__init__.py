@@ -7,3 +7,13 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 __version__ = "0.1.0"
+
+
+def _register() -> None:
+    import gymnasium
+
+    if "iout_mj/MultiAUV-v0" not in gymnasium.registry:
+        gymnasium.register(id="iout_mj/MultiAUV-v0", entry_point="iout_mj.envs:MultiAUVEnv")
+
+
+_register()

@@ -84,6 +84,11 @@ class AUVPhysics(engine.Physics):
         """Headings wrapped to (-pi, pi]."""
         return wrap_angle(self.yaw_rad())
 
+    def substep_positions_m(self) -> FloatArray:
+        """(substeps, N, 2) positions after every substep of the last `step` call."""
+        q = self.substep_qpos
+        return np.stack([q[:, self._qx], q[:, self._qy]], axis=2)
+
     def velocities_mps(self) -> FloatArray:
         v = self.data.qvel
         return np.stack([v[self._vx], v[self._vy]], axis=1)

@@ -107,6 +107,12 @@ def build_scene(cfg: Config) -> mujoco.MjSpec:
     for i in range(cfg.scenario.n_auvs):
         frame = spec.worldbody.add_frame(pos=[0.0, 0.0, AUV_DEPTH_M])
         spec.attach(auv_spec(cfg.motion), prefix=names.auv_prefix(i), frame=frame)
+        # The area's edges are a fence: joint limits the vehicle stops against.
+        for joint, side in ((names.JOINT_X, cfg.scenario.area_m[0]),
+                            (names.JOINT_Y, cfg.scenario.area_m[1])):
+            j = spec.joint(names.auv_prefix(i) + joint)
+            j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+            j.range = [0.0, side]
     return spec
 
 

@@ -1,0 +1,40 @@
+"""The paper's cubic propulsion-energy model (eqs. 12-13), numpy only."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from iout_mj.config import MotionConfig
+
+FloatArray = NDArray[np.float64]
+
+
+def drag_power_w(speed_mps: ArrayLike, motion: MotionConfig) -> FloatArray:
+    """Electrical power for propulsion alone: rho C_d S v^3 / (2 eta_prop)."""
+    v = np.asarray(speed_mps, dtype=float)
+    return motion.drag_factor_nspm2 * v**3 / motion.prop_efficiency
+
+
+def propulsion_power_w(speed_mps: ArrayLike, motion: MotionConfig) -> FloatArray:
+    """P_prop = rho C_d S v^3 / (2 eta_prop) + H."""
+    return drag_power_w(speed_mps, motion) + motion.hotel_power_w
+
+
+def travel_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike,
+                    motion: MotionConfig) -> FloatArray:
+    """The cubic term of E_prop: drag power over the travel time d / v (0 when v = 0)."""
+    v = np.asarray(speed_mps, dtype=float)
+    d = np.asarray(distance_m, dtype=float)
+    safe_v = np.where(v > 0, v, 1.0)
+    return np.where(v > 0, drag_power_w(v, motion) * d / safe_v, 0.0)
+
+
+def slot_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike, slot_s: float,
+                  motion: MotionConfig) -> FloatArray:
+    """E_prop of one slot (paper eq. 13): the cubic term plus H over the slot.
+
+    With d = v * slot (the paper's kinematics) this is P_prop(v) * slot. A vehicle that does not
+    move (v = 0 or a rejected move) pays the hotel load only.
+    """
+    return travel_energy_j(speed_mps, distance_m, motion) + motion.hotel_power_w * slot_s
