@@ -209,9 +209,9 @@ class ScenarioConfig:
     dock_radius_m: float = 70.0
     slot_s: float = 25.0
     horizon_slots: int = 55
-    start_jitter_m: float = 0.0
+    start_jitter_m: float = 10.0
     """Uniform random start offset of up to this many metres per axis (task RNG)."""
-    start_heading_jitter_deg: float = 0.0
+    start_heading_jitter_deg: float = 5.0
 
     def __post_init__(self) -> None:
         ax, ay = self.area_m

@@ -32,9 +32,13 @@ def travel_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike,
 
 def slot_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike, slot_s: float,
                   motion: MotionConfig) -> FloatArray:
-    """E_prop of one slot (paper eq. 13): the cubic term plus H over the slot.
+    """E_prop of one slot as the paper writes it (eq. 13): P_prop(v) * d / v.
 
-    With d = v * slot (the paper's kinematics) this is P_prop(v) * slot. A vehicle that does not
-    move (v = 0 or a rejected move) pays the hotel load only.
+    With d = v * slot (the paper's kinematics) this is P_prop(v) * slot. For v = 0 the travel
+    time d / v is undefined; the vehicle then pays the hotel load over the slot.
     """
-    return travel_energy_j(speed_mps, distance_m, motion) + motion.hotel_power_w * slot_s
+    v = np.asarray(speed_mps, dtype=float)
+    d = np.asarray(distance_m, dtype=float)
+    safe_v = np.where(v > 0, v, 1.0)
+    return np.where(v > 0, propulsion_power_w(v, motion) * d / safe_v,
+                    motion.hotel_power_w * slot_s)

@@ -1,0 +1,206 @@
+"""Non-learning policies: greedy (the paper's), round-robin, random-walk and a deadline planner.
+
+Each policy maps the env's public mission state (`env.unwrapped.mission`, a `Mission`) to a
+valid flat action for any N and K: `policy(mission) -> np.ndarray`. The observation alone
+would do for most of them, but reading the mission's named arrays keeps them exact and simple.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from iout_mj import acoustics
+from iout_mj.mission import Mission
+from iout_mj.network import pairwise_distance_m
+
+IntArray = NDArray[np.int64]
+NODE_REACHED_M = 60.0
+"""A node is 'being visited' within this distance."""
+CRUISE_MPS = 3.0
+DOCK_MARGIN_SLOTS = 3.0
+
+
+class Policy(Protocol):
+    name: str
+
+    def reset(self, seed: int | None = None) -> None: ...
+
+    def __call__(self, mission: Mission) -> IntArray: ...
+
+
+def _wrap(angle: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.mod(angle + np.pi, 2 * np.pi) - np.pi
+
+
+def steer(mission: Mission, targets_m: NDArray[np.float64],
+          speeds_mps: NDArray[np.float64]) -> tuple[IntArray, IntArray]:
+    """Heading and speed indices that turn each AUV toward its target and toward a speed."""
+    delta = targets_m - mission.positions_m
+    want = np.arctan2(delta[:, 1], delta[:, 0])
+    dtheta = _wrap(want - mission.heading_sp)
+    h = np.abs(mission.dtheta_rad[None, :] - dtheta[:, None]).argmin(axis=1)
+    dv = speeds_mps - mission.speed_sp
+    s = np.abs(mission.dv_mps[None, :] - dv[:, None]).argmin(axis=1)
+    return h, s
+
+
+def _slots_left(mission: Mission) -> float:
+    return float(mission.cfg.scenario.horizon_slots - mission.slot)
+
+
+def _must_dock(mission: Mission, extra_m: NDArray[np.float64] | float = 0.0) -> NDArray[np.bool_]:
+    """AUVs that must head for the dock now to arrive before the horizon: travel at cruise
+    speed, plus the slots to turn toward the dock and to ramp up to cruise speed."""
+    m = mission.cfg.motion
+    slot_m = CRUISE_MPS * mission.cfg.scenario.slot_s
+    delta = mission.dock_m - mission.positions_m
+    turn = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - mission.heading_sp))
+    turn_slots = turn / np.radians(m.dtheta_max_deg)
+    ramp_slots = np.maximum(CRUISE_MPS - mission.speed_sp, 0) / m.dv_max_mps
+    travel = (mission.dock_dist_m + extra_m - mission.cfg.scenario.dock_radius_m * 0.5) / slot_m
+    return travel + turn_slots + ramp_slots + DOCK_MARGIN_SLOTS >= _slots_left(mission)
+
+
+def _pack(h: IntArray, s: IntArray, wet: IntArray, data: IntArray) -> IntArray:
+    return np.stack([h, s, wet, data], axis=1).ravel().astype(np.int64)
+
+
+class Greedy:
+    """The paper's baseline: fly to the dock, arriving at the horizon; AET to the closest
+    node; uplink by round robin, independent of motion."""
+
+    name = "greedy"
+
+    def reset(self, seed: int | None = None) -> None:
+        pass
+
+    def __call__(self, mission: Mission) -> IntArray:
+        n, k = mission.n_auvs, mission.n_nodes
+        slot_s = mission.cfg.scenario.slot_s
+        remaining_s = max(_slots_left(mission) - 1, 1) * slot_s
+        speed = np.clip(mission.dock_dist_m / remaining_s, 0.4, mission.cfg.motion.v_max_mps)
+        targets = np.tile(mission.dock_m, (n, 1))
+        h, s = steer(mission, targets, speed)
+        d = pairwise_distance_m(mission.positions_m, mission.network.nodes_m)
+        wet = d.argmin(axis=1)
+        data = (mission.slot * n + np.arange(n)) % k
+        return _pack(h, s, wet, data)
+
+
+class RoundRobin:
+    """Visits the nodes in a fixed cyclic order (AUV i takes nodes i, i+N, ...), charging and
+    collecting from the node it visits, and docks in time."""
+
+    name = "round-robin"
+
+    def reset(self, seed: int | None = None) -> None:
+        self._next: NDArray[np.int64] | None = None
+
+    def __call__(self, mission: Mission) -> IntArray:
+        n, k = mission.n_auvs, mission.n_nodes
+        if self._next is None or mission.slot == 0:
+            self._next = np.arange(n) % k
+        nodes = mission.network.nodes_m
+        reached = np.linalg.norm(nodes[self._next] - mission.positions_m, axis=1) < NODE_REACHED_M
+        self._next = np.where(reached, (self._next + n) % k, self._next)
+        targets = nodes[self._next]
+        dock = _must_dock(mission)
+        targets = np.where(dock[:, None], mission.dock_m, targets)
+        h, s = steer(mission, targets, np.full(n, CRUISE_MPS))
+        return _pack(h, s, self._next, self._next)
+
+
+class RandomWalk:
+    """Uniformly random heading/speed increments and node choices (seeded)."""
+
+    name = "random-walk"
+
+    def __init__(self, seed: int | None = 0):
+        self.reset(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        self._rng = np.random.default_rng(seed)
+
+    def __call__(self, mission: Mission) -> IntArray:
+        return self._rng.integers(0, mission.action_high).astype(np.int64)
+
+
+class Planner:
+    """Deadline-aware AoI planner.
+
+    Every slot each AUV (in turn, excluding nodes the others already took) heads for the node
+    with the best AoI gain per slot of travel, among nodes it can still visit and then reach the
+    dock before the horizon; it stays at a node (circling) until its AoI resets. It charges the
+    node it heads for and collects from the feasible node with the highest AoI.
+    """
+
+    name = "planner"
+
+    def reset(self, seed: int | None = None) -> None:
+        self._target: NDArray[np.int64] | None = None
+
+    def __call__(self, mission: Mission) -> IntArray:
+        n, k = mission.n_auvs, mission.n_nodes
+        net = mission.network
+        nodes = net.nodes_m
+        slot_m = CRUISE_MPS * mission.cfg.scenario.slot_s
+        if self._target is None or mission.slot == 0:
+            self._target = np.full(n, -1)
+        d = pairwise_distance_m(mission.positions_m, nodes)  # (N, K)
+        node_to_dock = np.linalg.norm(nodes - mission.dock_m, axis=1)
+        left = _slots_left(mission)
+        taken: set[int] = set()
+        target = self._target.copy()
+        for i in range(n):
+            t = int(target[i])
+            if t >= 0 and (net.aoi[t] <= 1.0 or t in taken):
+                t = -1  # served (AoI reset) or claimed by another AUV
+            if t < 0:
+                travel = d[i] / slot_m
+                feasible = travel + 1 + node_to_dock / slot_m + DOCK_MARGIN_SLOTS < left
+                score = (net.aoi + 1) / (travel + mission.cfg.network.k_reset)
+                score[~feasible] = -np.inf
+                for j in taken:
+                    score[j] = -np.inf
+                t = int(score.argmax()) if np.isfinite(score).any() else -1
+            target[i] = t
+            if t >= 0:
+                taken.add(t)
+        self._target = target
+        go_dock = (target < 0) | _must_dock(mission)
+        safe_t = np.maximum(target, 0)
+        dist_t = d[np.arange(n), safe_t]
+        targets = np.where(go_dock[:, None], mission.dock_m, nodes[safe_t])
+        near = ~go_dock & (dist_t < NODE_REACHED_M)
+        speed = np.where(near, 0.8, np.clip(dist_t / mission.cfg.scenario.slot_s, 0.8, CRUISE_MPS))
+        speed = np.where(go_dock, CRUISE_MPS, speed)
+        h, s = steer(mission, targets, speed)
+        h = np.where(near, mission.cfg.motion.heading_levels - 1, h)  # circle at the node
+        req = acoustics.uplink_energy_j(d, mission.cfg.acoustics)
+        can = net.energy_j[None, :] >= req
+        data = np.empty(n, dtype=np.int64)
+        chosen: set[int] = set()
+        for i in range(n):
+            score = np.where(can[i], net.aoi, -1.0) - 1e-6 * d[i]
+            for j in chosen:
+                score[j] = -np.inf
+            data[i] = int(score.argmax())
+            chosen.add(int(data[i]))
+        wet = np.where(go_dock, d.argmin(axis=1), safe_t)
+        return _pack(h, s, wet, data)
+
+
+POLICIES = {"greedy": Greedy, "round-robin": RoundRobin, "random-walk": RandomWalk,
+            "planner": Planner}
+
+
+def make_policy(name: str, seed: int | None = 0) -> Policy:
+    """A baseline by name."""
+    if name not in POLICIES:
+        raise ValueError(f"unknown policy {name!r}: accepted {sorted(POLICIES)} or a policy file")
+    policy: Policy = POLICIES[name]()
+    policy.reset(seed)
+    return policy
