@@ -182,7 +182,7 @@ class RewardConfig:
 class PhysicsConfig:
     """MuJoCo model settings of the physics backend."""
 
-    timestep_s: float = 0.1
+    timestep_s: float = 0.05
     """Chosen by `iout-mj validate-energy` timestep convergence (see README)."""
     current_mps: Point = (0.0, 0.0)
     """Uniform ocean current (MuJoCo `wind`), world frame."""

@@ -31,7 +31,7 @@ from iout_mj.config import Config, MotionConfig
 AUV_DEPTH_M = -10.0
 SEABED_DEPTH_M = -30.0
 NODE_RADIUS_M = 8.0
-THRUST_GAIN_NSPM = 2000.0
+THRUST_GAIN_NSPM = 500.0
 """k_v of the surge speed servo, N per (m/s) of speed error."""
 
 

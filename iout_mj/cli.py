@@ -1,0 +1,132 @@
+"""`iout-mj` command line: link-budget, validate-energy, mission."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number; accepted a distance > 0 m")
+    if not np.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive distance; accepted > 0 m")
+    return value
+
+
+def _load_config(path: str | None) -> Any:
+    from iout_mj.config import Config
+
+    return Config.load(path) if path else Config()
+
+
+def cmd_link_budget(args: argparse.Namespace) -> int:
+    from iout_mj import acoustics
+
+    cfg = _load_config(args.config).acoustics
+    d = np.asarray(args.distance, dtype=float)
+    rows = [
+        {"distance_m": float(di), "harvest_power_w": float(hp), "harvest_energy_j": float(he),
+         "uplink_power_w": float(up), "uplink_energy_j": float(ue)}
+        for di, hp, he, up, ue in zip(d, acoustics.harvest_power_w(d, cfg),
+                                      acoustics.harvest_energy_j(d, cfg),
+                                      acoustics.uplink_power_w(d, cfg),
+                                      acoustics.uplink_energy_j(d, cfg))
+    ]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"AET at {cfg.f_wet_khz:g} kHz, P_tx {cfg.p_tx_w:g} W; uplink at {cfg.f_data_khz:g} kHz,"
+          f" {cfg.data_rate_bps / 1e3:g} kbit/s over {cfg.bandwidth_hz:g} Hz; "
+          f"slot {cfg.charging_s:g} s; noise '{cfg.noise_model}'")
+    print(f"{'distance m':>11} {'harvest W':>11} {'harvest J':>11} {'uplink W':>11} "
+          f"{'uplink J':>11}")
+    for r in rows:
+        print(f"{r['distance_m']:>11.1f} {r['harvest_power_w']:>11.4g} "
+              f"{r['harvest_energy_j']:>11.4g} {r['uplink_power_w']:>11.4g} "
+              f"{r['uplink_energy_j']:>11.4g}")
+    return 0
+
+
+def cmd_validate_energy(args: argparse.Namespace) -> int:
+    from iout_mj.config import make_config
+    from iout_mj.validation import format_table, validate
+
+    cfg = make_config(1, 7, base=_load_config(args.config))
+    figure = Path(args.out) / "energy_validation.png"
+    result = validate(cfg, figure=figure)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_table(result))
+        print(f"\nfigure: {figure}")
+    return 0
+
+
+def cmd_mission(args: argparse.Namespace) -> int:
+    from iout_mj.missions import run_mission
+
+    summary = run_mission(policy=args.policy, n_auvs=args.n_auvs, n_nodes=args.nodes,
+                          backend=args.backend, seed=args.seed, out=Path(args.out),
+                          video=not args.no_video, width=args.width, height=args.height,
+                          fps=args.fps, config=args.config, slots=args.slots)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="iout-mj", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("link-budget", help="AET harvest and uplink energy vs distance")
+    p.add_argument("--distance", type=_positive_float, nargs="+", default=[10, 100, 500],
+                   help="distances in metres (> 0)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
+    p.set_defaults(func=cmd_link_budget)
+
+    p = sub.add_parser("validate-energy", help="cubic propulsion model vs MuJoCo actuator power")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--out", default="renders", help="folder for the figure")
+    p.add_argument("--config", help="YAML/JSON config")
+    p.set_defaults(func=cmd_validate_energy)
+
+    p = sub.add_parser("mission", help="run one mission: metrics, trajectory figure, video")
+    p.add_argument("--policy", default="planner")
+    p.add_argument("--n-auvs", type=int, default=2)
+    p.add_argument("--nodes", type=int, default=7)
+    p.add_argument("--backend", choices=["mujoco", "kinematic"], default="mujoco")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="renders")
+    p.add_argument("--slots", type=int, default=None, help="stop after this many slots")
+    p.add_argument("--no-video", action="store_true")
+    p.add_argument("--width", type=int, default=960)
+    p.add_argument("--height", type=int, default=540)
+    p.add_argument("--fps", type=int, default=30)
+    p.add_argument("--config", help="YAML/JSON config")
+    p.set_defaults(func=cmd_mission)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from iout_mj.config import ConfigError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (ConfigError, ValueError, FileNotFoundError) as exc:
+        print(f"iout-mj {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

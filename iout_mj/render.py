@@ -1,0 +1,243 @@
+"""Offscreen mission rendering (EGL, OSMesa fallback): top-down and chase views, trails, links,
+node state and a text overlay; several frames per slot from the physics substeps.
+
+Nothing here runs unless a frame is asked for: an env without `render_mode` never imports it.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+from PIL import Image, ImageDraw, ImageFont
+
+from iout_mj import names, vehicle
+from iout_mj.physics import wrap_angle
+
+AUV_COLORS = np.array([[1.0, 0.85, 0.1, 1], [1.0, 0.3, 0.8, 1], [0.3, 1.0, 0.4, 1],
+                       [1.0, 0.5, 0.1, 1]])
+AET_COLOR = np.array([1.0, 0.55, 0.0, 0.9])
+UPLINK_COLOR = np.array([0.1, 0.95, 1.0, 0.9])
+DIM = np.array([0.45, 0.45, 0.45, 0.35])
+TRAIL_POINTS = 400
+MARKER_LENGTH_M = 40.0
+LINK_WIDTH_PX = 3.0
+
+
+class RenderError(RuntimeError):
+    """No offscreen OpenGL backend works on this machine."""
+
+
+def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    """A mujoco.Renderer on MUJOCO_GL (egl by default); falls back to osmesa, else explains."""
+    tried = []
+    for backend in dict.fromkeys([os.environ.get("MUJOCO_GL", "egl"), "egl", "osmesa"]):
+        os.environ["MUJOCO_GL"] = backend
+        os.environ["PYOPENGL_PLATFORM"] = backend
+        try:
+            return mujoco.Renderer(model, height, width, max_geom=20000)
+        except Exception as exc:  # noqa: BLE001 - each backend fails in its own way
+            tried.append(f"{backend}: {type(exc).__name__}: {exc}")
+    raise RenderError("offscreen rendering is not available: " + "; ".join(tried) + ". Install "
+                      "Mesa's EGL (Debian: libegl-mesa0 libegl1) or OSMesa (libosmesa6).")
+
+
+def aoi_color(aoi_frac: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Green (fresh) to red (stale) for AoI / A_max in [0, 1]."""
+    a = np.clip(aoi_frac, 0, 1)[:, None]
+    return np.concatenate([0.15 + 0.85 * a, 0.85 - 0.7 * a, 0.2 * np.ones_like(a),
+                           np.ones_like(a)], axis=1)
+
+
+class MissionRenderer:
+    """Frames of a `MultiAUVEnv` (either backend) at `width` x `height`.
+
+    The frame is the top-down view of the whole area beside a chase view of AUV 0
+    (when `width` > `height`), with an overlay of time, mean AoI, Jain, data and energy.
+    """
+
+    def __init__(self, env: Any, width: int, height: int, frames_per_slot: int = 8):
+        self.env = env
+        self.mission = env.mission
+        self.cfg = env.cfg
+        self.frames_per_slot = frames_per_slot
+        physics = env.physics
+        if physics is not None:
+            self.model, self.data = physics.model.ptr, physics.data.ptr
+            self._physics = physics
+        else:  # kinematic backend: the same scene, vehicles placed kinematically
+            self.model = vehicle.build_model(self.cfg)
+            self.data = mujoco.MjData(self.model)
+            self._physics = None
+        self._view_data = mujoco.MjData(self.model)
+        self.top_size = min(width, height)
+        self.width, self.height = width, height
+        self.top = make_renderer(self.model, height, self.top_size)
+        chase_w = width - self.top_size
+        self.chase = make_renderer(self.model, height, chase_w) if chase_w >= 64 else None
+        m = self.model
+        n = self.mission.n_auvs
+        self._qx = [m.jnt_qposadr[m.joint(names.auv_prefix(i) + names.JOINT_X).id] for i in range(n)]
+        self._qy = [m.jnt_qposadr[m.joint(names.auv_prefix(i) + names.JOINT_Y).id] for i in range(n)]
+        self._qyaw = [m.jnt_qposadr[m.joint(names.auv_prefix(i) + names.JOINT_YAW).id]
+                      for i in range(n)]
+        self._chase_cam = names.auv_prefix(0) + names.CHASE_CAMERA
+        self._font = ImageFont.load_default()
+        self.reset()
+
+    def reset(self) -> None:
+        self.trails: list[list[NDArray[np.float64]]] = [[] for _ in range(self.mission.n_auvs)]
+        self._slot_start_pose = self._pose_now()
+        self._pending: list[NDArray[np.uint8]] = []
+
+    # ------------------------------------------------------------------ poses
+    def _pose_now(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        m = self.mission
+        return m.positions_m.copy(), m.headings_rad.copy()
+
+    def _substep_poses(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Poses for the frames of the slot that just ended."""
+        k = self.frames_per_slot
+        if self._physics is not None:
+            q = self._physics.substep_qpos
+            idx = np.linspace(0, len(q) - 1, k + 1)[1:].round().astype(int)
+            return [(np.stack([q[i, self._qx], q[i, self._qy]], axis=1),
+                     np.asarray(q[i, self._qyaw])) for i in idx]
+        (p0, h0), (p1, h1) = self._slot_start_pose, self._pose_now()
+        dh = wrap_angle(h1 - h0)
+        return [(p0 + (p1 - p0) * f, h0 + dh * f) for f in np.arange(1, k + 1) / k]
+
+    def _place(self, xy: NDArray[np.float64], yaw: NDArray[np.float64]) -> mujoco.MjData:
+        d = self._view_data
+        d.qpos[:] = self.data.qpos
+        d.qpos[self._qx], d.qpos[self._qy], d.qpos[self._qyaw] = xy[:, 0], xy[:, 1], yaw
+        mujoco.mj_kinematics(self.model, d)
+        mujoco.mj_camlight(self.model, d)
+        return d
+
+    # ------------------------------------------------------------------ frames
+    def record_slot(self) -> None:
+        """Render the frames of the slot that just ended (call after each env step)."""
+        for xy, yaw in self._substep_poses():
+            for i in range(self.mission.n_auvs):
+                self.trails[i].append(xy[i].copy())
+            self._pending.append(self._compose(xy, yaw))
+        self._slot_start_pose = self._pose_now()
+
+    def take_frames(self) -> list[NDArray[np.uint8]]:
+        """Frames rendered since the last call."""
+        frames, self._pending = self._pending, []
+        return frames
+
+    def frame(self) -> NDArray[np.uint8]:
+        """The current frame."""
+        xy, yaw = self._pose_now()
+        return self._compose(xy, yaw)
+
+    def _compose(self, xy: NDArray[np.float64], yaw: NDArray[np.float64]) -> NDArray[np.uint8]:
+        d = self._place(xy, yaw)
+        self.top.update_scene(d, camera=names.TOP_CAMERA)
+        self._decorate(self.top.scene, xy, yaw, top=True)
+        views = [self.top.render()]
+        if self.chase is not None:
+            self.chase.update_scene(d, camera=self._chase_cam)
+            self._decorate(self.chase.scene, xy, yaw, top=False)
+            views.append(self.chase.render())
+        img = np.concatenate(views, axis=1)
+        return self._overlay(img)
+
+    # ------------------------------------------------------------------ decorations
+    def _add(self, scene: mujoco.MjvScene) -> mujoco.MjvGeom | None:
+        if scene.ngeom >= scene.maxgeom:
+            return None
+        g = scene.geoms[scene.ngeom]
+        scene.ngeom += 1
+        return g
+
+    def _line(self, scene: mujoco.MjvScene, a: NDArray[np.float64], b: NDArray[np.float64],
+              rgba: NDArray[np.float64], width: float) -> None:
+        g = self._add(scene)
+        if g is None:
+            return
+        mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_LINE, np.zeros(3), np.zeros(3),
+                            np.eye(3).ravel(), rgba.astype(np.float32))
+        mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_LINE, width, a, b)
+
+    def _decorate(self, scene: mujoco.MjvScene, xy: NDArray[np.float64],
+                  yaw: NDArray[np.float64], top: bool) -> None:
+        mission, net = self.mission, self.mission.network
+        z_auv = vehicle.AUV_DEPTH_M
+        z_bed = vehicle.SEABED_DEPTH_M + 4.5
+        # Nodes: colour = AoI, size = stored energy (log scale).
+        energy = np.log10(1 + net.energy_j / 1e-3)
+        radius = vehicle.NODE_RADIUS_M * (0.8 + 0.35 * energy)
+        colors = aoi_color(net.aoi / self.cfg.network.aoi_max)
+        for k, (x, y) in enumerate(net.nodes_m):
+            g = self._add(scene)
+            if g is None:
+                break
+            mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_CYLINDER,
+                                np.array([radius[k], radius[k], 1.5]), np.array([x, y, z_bed]),
+                                np.eye(3).ravel(), colors[k].astype(np.float32))
+        # Links of the slot being shown: AET (orange) and uplink (cyan, grey if it failed).
+        log = mission.log
+        if log.aet_nodes:
+            aet, up, ok = log.aet_nodes[-1], log.uplink_nodes[-1], log.uplink_ok[-1]
+            for i in range(mission.n_auvs):
+                if mission.docked[i] and len(log.positions_m) > 2:
+                    continue
+                p = np.array([xy[i, 0], xy[i, 1], z_auv])
+                q_aet = np.array([*net.nodes_m[aet[i]], z_bed])
+                q_up = np.array([*net.nodes_m[up[i]], z_bed + 1])
+                self._line(scene, p, q_aet, AET_COLOR, LINK_WIDTH_PX)
+                self._line(scene, p + [0, 0, 1], q_up, UPLINK_COLOR if ok[i] else DIM,
+                           LINK_WIDTH_PX)
+        # Trails and (top view) large heading markers, since a 3 m hull is a few pixels there.
+        for i in range(mission.n_auvs):
+            trail = self.trails[i][-TRAIL_POINTS:]
+            step = max(1, len(trail) // 200)
+            pts = trail[::step] + ([trail[-1]] if trail else [])
+            color = AUV_COLORS[i % len(AUV_COLORS)]
+            for a, b in zip(pts[:-1], pts[1:]):
+                self._line(scene, np.array([*a, z_auv]), np.array([*b, z_auv]), color, 2.0)
+            if top:
+                g = self._add(scene)
+                if g is None:
+                    break
+                c, s = np.cos(yaw[i]), np.sin(yaw[i])
+                mat = np.array([[0, -s, c], [0, c, s], [-1, 0, 0]], dtype=float)
+                mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_ARROW,
+                                    np.array([12.0, 12.0, MARKER_LENGTH_M]),
+                                    np.array([xy[i, 0], xy[i, 1], z_auv]), mat.ravel(),
+                                    color.astype(np.float32))
+
+    def _overlay(self, img: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        m = self.mission
+        slot_s = self.cfg.scenario.slot_s
+        energy_kj = ", ".join(f"{e / 1e3:.0f}" for e in m.propulsion_energy_j)
+        lines = [
+            f"t = {m.slot * slot_s:5.0f} s  (slot {m.slot}/{self.cfg.scenario.horizon_slots})",
+            f"mean AoI {m.network.mean_aoi:5.1f}   Jain {m.network.jain:4.2f}",
+            f"data {m.network.delivered_bits / 1e6:6.1f} Mbit",
+            f"energy/AUV {energy_kj} kJ",
+            "docked " + " ".join("Y" if d else "-" for d in m.docked),
+        ]
+        image = Image.fromarray(img)
+        draw = ImageDraw.Draw(image)
+        pad = 6
+        box_h = 14 * len(lines) + 2 * pad
+        draw.rectangle([0, 0, 250, box_h], fill=(0, 0, 0))
+        for j, text in enumerate(lines):
+            draw.text((pad, pad + 14 * j), text, fill=(255, 255, 255), font=self._font)
+        legend = "orange: AET   cyan: uplink   grey: failed uplink   node colour: AoI"
+        draw.rectangle([0, img.shape[0] - 18, 8 * len(legend) // 1.3, img.shape[0]], fill=(0, 0, 0))
+        draw.text((pad, img.shape[0] - 15), legend, fill=(230, 230, 230), font=self._font)
+        return np.asarray(image)
+
+    def close(self) -> None:
+        self.top.close()
+        if self.chase is not None:
+            self.chase.close()

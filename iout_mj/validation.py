@@ -1,0 +1,211 @@
+"""Validation of the paper's cubic propulsion model against MuJoCo-measured actuator power.
+
+Steady state: one AUV holds each speed; measured electrical power = mean |thrust x surge
+velocity| / eta_prop + H. Manoeuvres: setpoint sequences (one entry per 25 s slot), measured
+energy per slot (thrust and yaw, over eta_prop, plus H) against the paper's eq. 13 with the
+slot's commanded speed and measured distance. Timestep: every manoeuvre again at dt / 4.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from iout_mj import energy
+from iout_mj.config import Config, make_config
+from iout_mj.physics import AUVPhysics
+
+STEADY_SPEEDS_MPS = tuple(np.arange(1, 9) * 0.5)
+SETTLE_S = 100.0
+MEASURE_S = 25.0
+TIMESTEP_CANDIDATES_S = (0.25, 0.1, 0.05, 0.025)
+CONVERGENCE_TOL = 0.01
+
+
+@dataclass(frozen=True)
+class Maneuver:
+    """Per-slot setpoints (heading in degrees, unwrapped; speed in m/s) from a start speed."""
+
+    name: str
+    start_speed_mps: float
+    heading_deg: tuple[float, ...]
+    speed_mps: tuple[float, ...]
+    start_m: tuple[float, float] = (300.0, 500.0)
+    start_heading_deg: float = 0.0
+
+
+def _mission_maneuver() -> Maneuver:
+    """The setpoints of one full planner mission (kinematic backend, N = 1, K = 7, seed 0)."""
+    from iout_mj.baselines import make_policy
+    from iout_mj.kinematic import KinematicEnvironment
+
+    env = KinematicEnvironment(make_config(1, 7), seed=0)
+    policy = make_policy("planner")
+    env.reset()
+    start = env.mission.positions_m[0]
+    start_heading = float(np.degrees(env.mission.heading_sp[0]))
+    headings, speeds = [], []
+    while True:
+        ts = env.step(policy(env.mission))
+        headings.append(float(np.degrees(env.mission.heading_sp[0])))
+        speeds.append(float(env.mission.speed_sp[0]))
+        if ts.last():
+            break
+    return Maneuver("mission (planner, K=7)", 1.0, tuple(headings), tuple(speeds),
+                    (float(start[0]), float(start[1])), start_heading)
+
+
+def maneuvers() -> list[Maneuver]:
+    zigzag = tuple(25.0 * (i % 2) for i in range(8))
+    slowdown = tuple(max(3.0 - 0.4 * i, 0.0) for i in range(9))
+    return [
+        Maneuver("accelerate 0 to 4 m/s", 0.0, (0.0,) * 3, (4.0,) * 3),
+        Maneuver("90 deg turn at 2 m/s", 2.0, (90.0, 90.0), (2.0, 2.0)),
+        Maneuver("zig-zag +-25 deg at 2 m/s", 2.0, zigzag, (2.0,) * len(zigzag)),
+        Maneuver("slowdown 3 m/s to dock", 3.0, (0.0,) * len(slowdown), slowdown),
+        _mission_maneuver(),
+    ]
+
+
+def _physics(cfg: Config, dt_s: float) -> AUVPhysics:
+    cfg = cfg.replace(physics=dataclasses.replace(cfg.physics, timestep_s=dt_s))
+    return AUVPhysics.from_config(cfg)
+
+
+def steady_state(cfg: Config, speeds_mps: tuple[float, ...] = STEADY_SPEEDS_MPS) -> list[dict]:
+    """Measured vs model electrical power at constant speeds."""
+    physics = _physics(cfg, cfg.physics.timestep_s)
+    m = cfg.motion
+    settle, measure = round(SETTLE_S / physics.dt_s), round(MEASURE_S / physics.dt_s)
+    rows = []
+    for v in speeds_mps:
+        physics.set_poses(np.array([[100.0, 500.0]]), np.zeros(1), np.array([v]))
+        physics.set_commands(np.zeros(1), np.array([v]))
+        physics.step(settle)
+        before = physics.mech_energy_j.sum()
+        physics.step(measure)
+        measured = (physics.mech_energy_j.sum() - before) / MEASURE_S / m.prop_efficiency
+        measured += m.hotel_power_w
+        model = float(energy.propulsion_power_w(v, m))
+        rows.append({"speed_mps": float(v), "measured_power_w": float(measured),
+                     "model_power_w": model, "rel_error": float((measured - model) / model),
+                     "measured_speed_mps": float(physics.surge_mps()[0])})
+    physics.free()
+    return rows
+
+
+def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
+    """Per-slot measured and model energy, distance and end position of one manoeuvre."""
+    physics = _physics(cfg, dt_s)
+    m, slot_s = cfg.motion, cfg.scenario.slot_s
+    nstep = round(slot_s / physics.dt_s)
+    physics.set_poses(np.array([man.start_m]), np.radians([man.start_heading_deg]),
+                      np.array([man.start_speed_mps]))
+    measured, model, distance, ends = [], [], [], []
+    for heading_deg, speed in zip(man.heading_deg, man.speed_mps):
+        start = physics.positions_m()[0]
+        before = physics.mech_energy_j.sum()
+        physics.set_commands(np.radians([heading_deg]), np.array([speed]))
+        physics.step(nstep)
+        end = physics.positions_m()[0]
+        d = float(np.linalg.norm(end - start))
+        e = (physics.mech_energy_j.sum() - before) / m.prop_efficiency + m.hotel_power_w * slot_s
+        measured.append(float(e))
+        model.append(float(energy.slot_energy_j(speed, d, slot_s, m)))
+        distance.append(d)
+        ends.append(end.copy())
+    physics.free()
+    return {"measured_j": np.array(measured), "model_j": np.array(model),
+            "distance_m": np.array(distance), "end_m": np.array(ends)}
+
+
+def timestep_change(cfg: Config, mans: list[Maneuver], dt_s: float) -> float:
+    """Largest relative change of per-slot energy, or of a slot's end position relative to the
+    path travelled so far, when dt is quartered."""
+    worst = 0.0
+    for man in mans:
+        a, b = run_maneuver(cfg, man, dt_s), run_maneuver(cfg, man, dt_s / 4)
+        de = np.abs(a["measured_j"] - b["measured_j"]) / b["measured_j"]
+        path_m = np.maximum(np.cumsum(b["distance_m"]), 1.0)  # travelled since the start
+        dp = np.linalg.norm(a["end_m"] - b["end_m"], axis=1) / path_m
+        worst = max(worst, float(de.max()), float(dp.max()))
+    return worst
+
+
+def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str, Any]:
+    """Run the whole validation; optionally draw the figure."""
+    cfg = cfg or make_config(1, 7)
+    mans = maneuvers()
+    steady = steady_state(cfg)
+    man_rows, traces = [], []
+    for man in mans:
+        r = run_maneuver(cfg, man, cfg.physics.timestep_s)
+        meas, mod = float(r["measured_j"].sum()), float(r["model_j"].sum())
+        man_rows.append({"name": man.name, "slots": len(man.speed_mps), "measured_energy_j": meas,
+                         "model_energy_j": mod, "rel_error": (meas - mod) / mod})
+        traces.append((man.name, r))
+    changes = {dt: timestep_change(cfg, mans, dt) for dt in TIMESTEP_CANDIDATES_S}
+    ok = [dt for dt, c in changes.items() if c < CONVERGENCE_TOL]
+    chosen = max(ok) if ok else min(TIMESTEP_CANDIDATES_S)
+    result = {
+        "steady": steady,
+        "maneuvers": man_rows,
+        "timestep": {"dt_s": chosen, "rel_change_quarter_dt": changes[chosen],
+                     "candidates": {str(k): v for k, v in changes.items()},
+                     "configured_dt_s": cfg.physics.timestep_s},
+    }
+    if figure is not None:
+        _figure(result, traces, figure)
+    return result
+
+
+def _figure(result: dict[str, Any], traces: list, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    steady = result["steady"]
+    v = [r["speed_mps"] for r in steady]
+    axes[0].plot(v, [r["model_power_w"] for r in steady], "-", label="paper model (cubic)")
+    axes[0].plot(v, [r["measured_power_w"] for r in steady], "o", label="MuJoCo, measured")
+    axes[0].set(xlabel="speed (m/s)", ylabel="electrical power (W)",
+                title="Steady state: power vs speed")
+    axes[0].legend()
+    axes[0].grid(alpha=0.3)
+    ax = axes[1]
+    for i, (name, r) in enumerate(traces):
+        slots = np.arange(1, len(r["measured_j"]) + 1)
+        line = ax.plot(slots, r["measured_j"] / 1e3, "-", color=f"C{i}", label=f"{name}")
+        ax.plot(slots, r["model_j"] / 1e3, "--", color=line[0].get_color())
+    ax.set(xlabel="slot", ylabel="energy per slot (kJ)",
+           title="Manoeuvres: measured (solid) vs model (dashed)")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def format_table(result: dict[str, Any]) -> str:
+    lines = ["Steady state (electrical power, W)",
+             f"{'speed m/s':>10} {'measured':>10} {'model':>10} {'rel.err':>9}"]
+    for r in result["steady"]:
+        lines.append(f"{r['speed_mps']:>10.1f} {r['measured_power_w']:>10.2f} "
+                     f"{r['model_power_w']:>10.2f} {r['rel_error']:>+9.2%}")
+    lines += ["", "Manoeuvres (energy over the manoeuvre, kJ)",
+              f"{'manoeuvre':<28} {'slots':>5} {'measured':>9} {'model':>9} {'gap':>8}"]
+    for r in result["maneuvers"]:
+        lines.append(f"{r['name']:<28} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
+                     f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%}")
+    ts = result["timestep"]
+    cands = ", ".join(f"dt={k} s: {v:.2%}" for k, v in ts["candidates"].items())
+    lines += ["", f"Timestep: largest dt with < 1% change when quartered: {ts['dt_s']} s "
+              f"({ts['rel_change_quarter_dt']:.3%}); {cands}"]
+    return "\n".join(lines)
