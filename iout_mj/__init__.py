@@ -1,12 +1,36 @@
 """iout-mj: physics-grounded multi-AUV data collection for the Internet of Underwater Things."""
 
 import os
-
-# Headless by default: MuJoCo's offscreen renderer through EGL (Mesa's llvmpipe without a GPU).
-os.environ.setdefault("MUJOCO_GL", "egl")
-os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+from ctypes.util import find_library
 
 __version__ = "0.1.0"
+
+_GL_LIBRARIES = {"egl": "EGL", "osmesa": "OSMesa"}
+GL_NOTE = ""
+"""Why the offscreen GL backend differs from the one asked for (empty when it does not)."""
+
+
+def _choose_gl_backend() -> None:
+    """Headless rendering: EGL (Mesa's llvmpipe without a GPU), else OSMesa, else disabled.
+
+    Must run before mujoco is imported: mujoco binds its GL backend at import and fails to
+    import at all when MUJOCO_GL names a library that is missing.
+    """
+    global GL_NOTE
+    requested = os.environ.get("MUJOCO_GL", "egl").lower()
+    if requested not in _GL_LIBRARIES:
+        return  # glfw, disable, ...: the user's choice stands
+    chosen = next((b for b in dict.fromkeys([requested, *_GL_LIBRARIES])
+                   if find_library(_GL_LIBRARIES[b])), None)
+    if chosen is None:
+        GL_NOTE = (f"MUJOCO_GL={requested}: neither libEGL nor libOSMesa is installed; "
+                   "rendering is disabled")
+        chosen = "disable"
+    elif chosen != requested:
+        GL_NOTE = f"MUJOCO_GL={requested}: lib{_GL_LIBRARIES[requested]} is missing; using {chosen}"
+    os.environ["MUJOCO_GL"] = chosen
+    if chosen != "disable":
+        os.environ["PYOPENGL_PLATFORM"] = chosen
 
 
 def _register() -> None:
@@ -16,4 +40,5 @@ def _register() -> None:
         gymnasium.register(id="iout_mj/MultiAUV-v0", entry_point="iout_mj.envs:MultiAUVEnv")
 
 
+_choose_gl_backend()
 _register()

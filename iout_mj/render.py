@@ -32,17 +32,18 @@ class RenderError(RuntimeError):
 
 
 def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
-    """A mujoco.Renderer on MUJOCO_GL (egl by default); falls back to osmesa, else explains."""
-    tried = []
-    for backend in dict.fromkeys([os.environ.get("MUJOCO_GL", "egl"), "egl", "osmesa"]):
-        os.environ["MUJOCO_GL"] = backend
-        os.environ["PYOPENGL_PLATFORM"] = backend
-        try:
-            return mujoco.Renderer(model, height, width, max_geom=20000)
-        except Exception as exc:  # noqa: BLE001 - each backend fails in its own way
-            tried.append(f"{backend}: {type(exc).__name__}: {exc}")
-    raise RenderError("offscreen rendering is not available: " + "; ".join(tried) + ". Install "
-                      "Mesa's EGL (Debian: libegl-mesa0 libegl1) or OSMesa (libosmesa6).")
+    """A mujoco.Renderer on the backend `iout_mj` chose at import (EGL, else OSMesa)."""
+    import iout_mj
+
+    backend = os.environ.get("MUJOCO_GL", "")
+    try:
+        return mujoco.Renderer(model, height, width, max_geom=20000)
+    except Exception as exc:  # noqa: BLE001 - each GL backend fails in its own way
+        note = f" ({iout_mj.GL_NOTE})" if iout_mj.GL_NOTE else ""
+        raise RenderError(
+            f"offscreen rendering failed with MUJOCO_GL={backend!r}{note}: "
+            f"{type(exc).__name__}: {exc}. Headless rendering needs Mesa's EGL (Debian: "
+            "libegl-mesa0 libegl1) or OSMesa (libosmesa6); set MUJOCO_GL=egl or osmesa.") from exc
 
 
 def aoi_color(aoi_frac: NDArray[np.float64]) -> NDArray[np.float64]:

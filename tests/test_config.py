@@ -1,0 +1,95 @@
+"""Config: defaults, presets, round trips, and a clear error for each kind of bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from iout_mj.config import (
+    PAPER_LAYOUTS,
+    AcousticsConfig,
+    Config,
+    ConfigError,
+    MotionConfig,
+    ScenarioConfig,
+    make_config,
+    random_layout,
+)
+
+
+def test_paper_defaults():
+    cfg = Config()
+    assert cfg.motion.drag_factor_nspm2 == pytest.approx(9.0)
+    assert cfg.scenario.horizon_slots == 55 and cfg.scenario.slot_s == 25
+    assert cfg.acoustics.f_wet_khz == 70 and cfg.acoustics.f_data_khz == 50
+    assert cfg.network.k_reset == 3
+
+
+@pytest.mark.parametrize("suffix", [".yaml", ".json"])
+def test_round_trip(tmp_path, suffix):
+    cfg = make_config(3, 13)
+    path = tmp_path / f"c{suffix}"
+    cfg.save(path)
+    assert Config.load(path) == cfg
+
+
+def test_presets_and_random_layouts():
+    assert make_config(1, 13).scenario.nodes_m == tuple(
+        (float(x), float(y)) for x, y in PAPER_LAYOUTS[13])
+    for k in (2, 9, 30):
+        nodes = np.array(random_layout(k, seed=k))
+        assert len(nodes) == k
+        assert np.all((nodes >= 0) & (nodes <= 1000))
+        dist = np.linalg.norm(nodes[:, None] - nodes[None], axis=2) + np.eye(k) * 1e9
+        assert dist.min() >= 80.0
+        assert np.all(np.linalg.norm(nodes - [830, 830], axis=1) > 70)
+    assert random_layout(9, seed=1) == random_layout(9, seed=1)
+    assert random_layout(9, seed=1) != random_layout(9, seed=2)
+
+
+@pytest.mark.parametrize(("data", "match"), [
+    ({"motion": {"v_max": 4}}, r"unknown key.*v_max"),
+    ({"motion": {"v_max_mps": "fast"}}, r"v_max_mps.*wrong type.*number"),
+    ({"motion": {"heading_levels": 11.5}}, r"heading_levels.*wrong type.*integer"),
+    ({"acoustics": {"p_tx_w": -5}}, r"p_tx_w=-5.0 is invalid: accepted a finite number > 0"),
+    ({"acoustics": {"eta_tx": 1.5}}, r"eta_tx=1.5 is invalid: accepted a number in \(0, 1\]"),
+    ({"motion": {"prop_efficiency": 0}}, r"prop_efficiency"),
+    ({"scenario": {"nodes_m": [[100, 100]]}}, r"nodes_m.*2 to 30 nodes"),
+    ({"scenario": {"dock_center_m": [990, 500]}}, r"dock_center_m.*inside area_m"),
+    ({"scenario": {"n_auvs": 5}}, r"n_auvs=5.*1 to 4"),
+    ({"scenario": {"nodes_m": [[100, 100], [2000, 5]]}}, r"nodes_m\[1\].*inside area_m"),
+    ({"acoustics": {"noise_model": "loud"}}, r"noise_model.*'flat' or 'wenz'"),
+    ({"scenario": {"area_m": [1000]}}, r"area_m.*list of 2 values"),
+    ([1, 2], r"wrong type: accepted a mapping"),
+])
+def test_bad_input_names_field_value_and_accepted(data, match):
+    with pytest.raises(ConfigError, match=match):
+        Config.from_dict(data)
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist"):
+        Config.load(tmp_path / "missing.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("motion: [unclosed")
+    with pytest.raises(ConfigError, match="not valid YAML/JSON"):
+        Config.load(bad)
+    with pytest.raises(ConfigError, match="accepted suffixes"):
+        Config().save(tmp_path / "c.txt")
+    ok = tmp_path / "partial.json"
+    ok.write_text(json.dumps({"motion": {"hotel_power_w": 20}}))
+    assert Config.load(ok).motion.hotel_power_w == 20.0
+
+
+def test_make_config_errors():
+    with pytest.raises(ConfigError, match="layout='random'"):
+        make_config(2, 9, layout="paper")
+    with pytest.raises(ConfigError, match="layout='grid'"):
+        make_config(2, 7, layout="grid")
+
+
+def test_frozen():
+    with pytest.raises(AttributeError):
+        MotionConfig().v_max_mps = 5  # type: ignore[misc]
+    assert ScenarioConfig().n_nodes == 7
+    assert AcousticsConfig().n_hydrophones == 4

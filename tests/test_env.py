@@ -1,0 +1,243 @@
+"""The gymnasium environment on both backends."""
+
+import dataclasses
+import pickle
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from iout_mj.config import ConfigError, make_config
+from iout_mj.envs import ENV_ID, MultiAUVEnv
+from iout_mj.mission import REWARD_TERMS
+
+BACKENDS = ["kinematic", "mujoco"]
+METRIC_KEYS = {"mean_aoi", "objective", "jain", "delivered_bits", "propulsion_energy_j",
+               "min_separation_m", "docked", "mission_slots", "collisions"}
+
+
+def make(backend, **kw):
+    return gym.make(ENV_ID, backend=backend, **kw)
+
+
+def rollout(env, seed, actions):
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for a in actions:
+        obs, r, term, trunc, info = env.step(a)
+        out.append((obs, r, term, trunc, info.get("metrics")))
+        if term or trunc:
+            break
+    return out
+
+
+def scenario(cfg, **changes):
+    return cfg.replace(scenario=dataclasses.replace(cfg.scenario, **changes))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_checkers(backend):
+    env = make(backend, n_auvs=2, n_nodes=7)
+    check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(env.unwrapped, warn=True)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_spaces_and_finite_observations(backend):
+    env = make(backend, n_auvs=3, n_nodes=13)
+    assert list(env.action_space.nvec) == [11, 7, 13, 13] * 3
+    obs, _ = env.reset(seed=1)
+    assert obs.shape == (2 * 3 + 2 * 3 + 3 + 3 + 13 + 13 + 39 + 3 + 1,)
+    env.action_space.seed(1)
+    done = False
+    while not done:
+        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs)
+        assert np.isfinite(r)
+        done = term or trunc
+    assert METRIC_KEYS <= set(info["metrics"])
+    assert info["metrics"]["mission_slots"] <= 55
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_same_seed_same_trajectory(backend):
+    env = make(backend)
+    rng = np.random.default_rng(3)
+    actions = [rng.integers(0, env.action_space.nvec) for _ in range(55)]
+    a, b = rollout(env, 7, actions), rollout(env, 7, actions)
+    c = rollout(env, 8, actions)
+    assert np.array_equal(a[0], b[0]) and not np.array_equal(a[0], c[0])
+    for x, y in zip(a[1:], b[1:]):
+        assert np.array_equal(x[0], y[0]) and x[1:4] == y[1:4] and x[4] == y[4]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_pickle_round_trip(backend):
+    env = make(backend, n_auvs=1, n_nodes=13).unwrapped
+    clone = pickle.loads(pickle.dumps(env))
+    actions = [np.array([6, 4, 1, 1])] * 5
+    a, b = rollout(env, 2, actions), rollout(clone, 2, actions)
+    assert all(np.array_equal(x[0], y[0]) for x, y in zip(a[1:], b[1:]))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_reward_is_sum_of_terms(backend):
+    env = make(backend)
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    for _ in range(10):
+        _, r, *_, info = env.step(env.action_space.sample())
+        assert set(info["reward_terms"]) == set(REWARD_TERMS)
+        assert r == pytest.approx(sum(info["reward_terms"].values()))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_bad_actions(backend):
+    env = make(backend, n_auvs=2, n_nodes=7)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(7, dtype=int))
+    with pytest.raises(ValueError, match=r"AUV 1: aet_node index 7 is out of range; accepted 0 to 6"):
+        env.step(np.array([5, 3, 0, 0, 5, 3, 7, 0]))
+    with pytest.raises(ValueError, match=r"AUV 0: heading index -1"):
+        env.step(np.array([-1, 3, 0, 0, 5, 3, 0, 0]))
+    with pytest.raises(ValueError, match="non-integer"):
+        env.step(np.array([5.5, 3, 0, 0, 5, 3, 0, 0]))
+    env.step(np.array([5.0, 3, 0, 0, 5, 3, 0, 0]))  # integral floats are accepted
+
+
+def test_bad_env_arguments(tmp_path):
+    with pytest.raises(ValueError, match="backend='bullet'"):
+        make("bullet")
+    with pytest.raises(ConfigError, match="layout"):
+        gym.make(ENV_ID, layout="grid")
+    with pytest.raises(ConfigError, match="unknown key"):
+        gym.make(ENV_ID, config={"scenario": {"n_robots": 2}})
+    with pytest.raises(ConfigError, match="n_auvs=9"):
+        gym.make(ENV_ID, n_auvs=9)
+    with pytest.raises(ValueError, match="render_mode"):
+        MultiAUVEnv(render_mode="human")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_network_and_energy_bookkeeping(backend):
+    cfg = scenario(make_config(1, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0)
+    env = make(backend, config=cfg)
+    env.reset(seed=0)
+    m = env.unwrapped.mission
+    # straight on at 1 m/s from (50, 50): charge and collect from node 0 at (100, 100)
+    _, _, _, _, info = env.step(np.array([5, 3, 0, 0]))
+    assert m.network.deliveries[0] == 1 and m.network.deliveries[1:].sum() == 0
+    assert m.network.aoi[0] == 2.0 and m.network.aoi[1] == 2.0
+    assert m.network.energy_j[0] > cfg.network.node_initial_energy_j  # AET outweighs uplink
+    expected = (9.0 * 1.0**3 / 0.7 + 40.0) * 25.0
+    assert m.propulsion_energy_j[0] == pytest.approx(expected, rel=0.02)
+    for _ in range(2):
+        env.step(np.array([5, 3, 0, 0]))
+    assert m.network.aoi[0] == 1.0  # third delivery resets
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_boundary_attempt_is_penalised_and_kept_inside(backend):
+    cfg = scenario(make_config(1, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0,
+                   start_heading_rad=float(np.pi), starts_m=((40.0, 500.0),))
+    env = make(backend, config=cfg)
+    env.reset(seed=0)
+    terms = []
+    for _ in range(3):
+        _, _, _, _, info = env.step(np.array([5, 3, 0, 0]))  # keep going west at 1 m/s
+        terms.append(info["reward_terms"]["boundary"])
+    assert terms[0] == 0.0 and terms[1] == -20.0
+    x = env.unwrapped.mission.positions_m[0, 0]
+    assert -0.05 <= x <= 16.0  # the fence is a (stiff) soft constraint
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_docking_terminates_with_bonus(backend):
+    cfg = scenario(make_config(1, 7), starts_m=((745.0, 830.0),), start_jitter_m=0.0,
+                   start_heading_jitter_deg=0.0)
+    env = make(backend, config=cfg)
+    env.reset(seed=0)
+    _, r, term, trunc, info = env.step(np.array([5, 3, 0, 0]))
+    assert term and not trunc
+    assert info["reward_terms"]["docking"] == 70.0  # 60 first entry + 10 all docked
+    assert info["metrics"]["docked"] == [True]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_truncation_at_horizon(backend):
+    env = make(backend, config=scenario(make_config(2, 7), horizon_slots=3))
+    env.reset(seed=0)
+    flags = [env.step(np.array([5, 3, 0, 0, 5, 3, 1, 1]))[2:4] for _ in range(3)]
+    assert flags == [(False, False), (False, False), (False, True)]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_collision_penalty(backend):
+    cfg = scenario(make_config(2, 7), starts_m=((300.0, 300.0), (300.0, 330.0)),
+                   start_jitter_m=0.0, start_heading_jitter_deg=0.0)
+    env = make(backend, config=cfg)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.array([5, 3, 0, 0, 5, 3, 1, 1]))
+    d = 30.0  # parallel tracks 30 m apart
+    expected = -4.0 * (1 - np.exp(-((100 - d) ** 2) / (2 * 20.0**2)))
+    assert info["reward_terms"]["collision"] == pytest.approx(expected, rel=0.02)
+    far = scenario(cfg, starts_m=((100.0, 100.0), (600.0, 100.0)))
+    env = make(backend, config=far)
+    env.reset(seed=0)
+    assert env.step(np.array([5, 3, 0, 0, 5, 3, 1, 1]))[4]["reward_terms"]["collision"] == 0.0
+
+
+def test_kinematic_and_physics_agree_on_gentle_manoeuvres():
+    cfg = scenario(make_config(2, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0)
+    envs = {b: make(b, config=cfg) for b in BACKENDS}
+    pattern = [6, 5, 5, 4, 5, 6, 5, 5, 4, 5]  # +-5 deg turns; speed +0.13 m/s then hold
+    speeds = [4, 4, 3, 3, 3, 3, 3, 3, 3, 3]
+    for env in envs.values():
+        env.reset(seed=0)
+    for h, s in zip(pattern, speeds):
+        a = np.array([h, s, 0, 0, h, s, 3, 3])
+        for env in envs.values():
+            env.step(a)
+    kin, phy = (envs[b].unwrapped.mission for b in BACKENDS)
+    path = 10 * 25 * 1.4
+    assert np.abs(kin.positions_m - phy.positions_m).max() < 0.04 * path
+    assert np.array_equal(kin.heading_sp, phy.heading_sp)
+    # same bookkeeping rules: the deliveries differ only if positions put a node out of reach
+    assert np.array_equal(kin.network.deliveries, phy.network.deliveries)
+
+
+def test_diverged_physics_ends_episode_with_error():
+    env = make("mujoco")
+    obs0, _ = env.reset(seed=0)
+    env.unwrapped.physics.data.qvel[:] = 1e200
+    obs, r, term, trunc, info = env.step(np.array([5, 3, 0, 0, 5, 3, 0, 0]))
+    assert term and "error" in info and "metrics" in info
+    assert np.all(np.isfinite(obs))
+
+
+def test_random_layout_per_episode():
+    env = make("kinematic", n_auvs=1, n_nodes=9, layout="random")
+    env.reset(seed=1)
+    a = env.unwrapped.mission.network.nodes_m.copy()
+    env.reset(seed=2)
+    b = env.unwrapped.mission.network.nodes_m.copy()
+    env.reset(seed=1)
+    assert not np.array_equal(a, b)
+    assert np.array_equal(a, env.unwrapped.mission.network.nodes_m)
+
+
+def test_one_env_stays_under_200_mb():
+    # VmHWM (peak resident set) of the child alone; ru_maxrss would carry pytest's over exec.
+    code = ("import gymnasium as gym, numpy as np, iout_mj\n"
+            "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=4, n_nodes=13)\n"
+            "env.reset(seed=0)\n"
+            "for _ in range(55): env.step(env.action_space.sample())\n"
+            "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    rss_mb = int(out.stdout.split()[-1]) / 1024
+    assert rss_mb < 200, rss_mb

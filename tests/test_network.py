@@ -1,0 +1,101 @@
+"""Sensor-node rules: AoI growth, cap, K_reset, energy causality, Jain."""
+
+import numpy as np
+import pytest
+
+from iout_mj import acoustics
+from iout_mj.config import AcousticsConfig, NetworkConfig
+from iout_mj.network import SensorNetwork, jain_index
+
+NODES = [(100.0, 100.0), (900.0, 900.0)]
+NEAR = np.array([[100.0, 150.0]])  # 50 m from node 0, far from node 1
+
+
+def make(k_reset=3, aoi_max=50.0, e0=0.1):
+    return SensorNetwork(NODES, NetworkConfig(k_reset=k_reset, aoi_max=aoi_max,
+                                              node_initial_energy_j=e0), AcousticsConfig())
+
+
+def step(net, data_node, wet_node=0, xy=NEAR, active=True):
+    return net.step(xy, [wet_node], [data_node], [active])
+
+
+def test_aoi_grows_by_one_and_caps():
+    net = make(aoi_max=5.0)
+    for expected in (2, 3, 4, 5, 5, 5):
+        step(net, data_node=1, active=False)  # inactive AUV: nothing delivered
+        assert net.aoi[0] == expected
+
+
+def test_reset_after_exactly_k_reset_deliveries():
+    net = make(k_reset=3)
+    aoi = []
+    for _ in range(4):
+        out = step(net, data_node=0)
+        assert out.delivered[0]
+        aoi.append(net.aoi[0])
+    # deliveries 1 and 2 only age the node; the third resets it to 1; the counter restarts
+    assert aoi == [2.0, 3.0, 1.0, 2.0]
+    assert net.service_count[0] == 1
+    assert net.deliveries[0] == 4
+
+
+def test_failed_deliveries_do_not_reset_or_count():
+    net = make(e0=0.0)  # no stored energy: the node cannot transmit
+    far = np.array([[900.0, 100.0]])  # and AET from 800 m harvests almost nothing
+    for _ in range(5):
+        out = step(net, data_node=0, wet_node=1, xy=far)
+        assert not out.delivered[0]
+        assert not out.uplink_ok[0]
+    assert net.aoi[0] == 6.0
+    assert net.deliveries[0] == 0
+    assert net.service_count[0] == 0
+
+
+def test_energy_causality_pays_e_req_from_start_of_slot_energy():
+    cfg = AcousticsConfig()
+    d = 50.0
+    req = float(acoustics.uplink_energy_j(d, cfg))
+    harvest = float(acoustics.harvest_energy_j(d, cfg))
+    net = make(e0=req * 0.5)  # not enough at the start of the slot
+    out = step(net, data_node=0, wet_node=0)
+    assert not out.delivered[0]  # this slot's harvest does not count for this slot's uplink
+    assert net.energy_j[0] == pytest.approx(req * 0.5 + harvest)
+    out = step(net, data_node=0, wet_node=1)  # now it has enough; charge the other node
+    assert out.delivered[0]
+    assert net.energy_j[0] == pytest.approx(req * 0.5 + harvest - req)
+
+
+def test_two_auvs_on_one_node_count_one_delivery_at_the_nearest_cost():
+    net = make()
+    xy = np.array([[100.0, 150.0], [100.0, 400.0]])
+    e0 = net.energy_j[0]
+    out = net.step(xy, [1, 1], [0, 0], [True, True])
+    assert out.uplink_ok.tolist() == [True, True]
+    assert net.deliveries[0] == 1
+    spent = e0 + out.harvested_j[0] - net.energy_j[0]
+    assert spent == pytest.approx(acoustics.uplink_energy_j(50.0, AcousticsConfig()))
+
+
+def test_harvest_from_two_auvs_adds_up():
+    net = make(e0=0.0)
+    xy = np.array([[100.0, 150.0], [100.0, 150.0]])
+    out = net.step(xy, [0, 0], [1, 1], [True, True])
+    single = acoustics.harvest_energy_j(50.0, AcousticsConfig())
+    assert out.harvested_j[0] == pytest.approx(2 * single)
+
+
+def test_delivered_bits():
+    net = make()
+    step(net, data_node=0)
+    assert net.delivered_bits == 12_000 * 25
+
+
+@pytest.mark.parametrize(("counts", "expected"), [
+    ([3, 3, 3, 3], 1.0),
+    ([4, 0, 0, 0], 0.25),          # 16 / (4 * 16)
+    ([1, 2, 3], 36 / (3 * 14)),    # 0.857142...
+    ([0, 0, 0], 0.0),              # nothing delivered: defined as 0
+])
+def test_jain(counts, expected):
+    assert jain_index(counts) == pytest.approx(expected)
