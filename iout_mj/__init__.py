@@ -20,11 +20,15 @@ def _choose_gl_backend() -> None:
     requested = os.environ.get("MUJOCO_GL", "egl").lower()
     if requested not in _GL_LIBRARIES:
         return  # glfw, disable, ...: the user's choice stands
-    chosen = next((b for b in dict.fromkeys([requested, *_GL_LIBRARIES])
-                   if find_library(_GL_LIBRARIES[b])), None)
+    chosen = next(
+        (b for b in dict.fromkeys([requested, *_GL_LIBRARIES]) if find_library(_GL_LIBRARIES[b])),
+        None,
+    )
     if chosen is None:
-        GL_NOTE = (f"MUJOCO_GL={requested}: neither libEGL nor libOSMesa is installed; "
-                   "rendering is disabled")
+        GL_NOTE = (
+            f"MUJOCO_GL={requested}: neither libEGL nor libOSMesa is installed; "
+            "rendering is disabled"
+        )
         chosen = "disable"
     elif chosen != requested:
         GL_NOTE = f"MUJOCO_GL={requested}: lib{_GL_LIBRARIES[requested]} is missing; using {chosen}"

@@ -35,7 +35,9 @@ def thorp_absorption_db_per_km(f_khz: ArrayLike) -> FloatArray:
     return 0.11 * f2 / (1 + f2) + 44 * f2 / (4100 + f2) + 2.75e-4 * f2 + 0.003
 
 
-def transmission_loss_db(distance_m: ArrayLike, f_khz: float, spreading_factor: float) -> FloatArray:
+def transmission_loss_db(
+    distance_m: ArrayLike, f_khz: float, spreading_factor: float
+) -> FloatArray:
     """TL = k_s * 10 log10(d) + alpha(f) d/1000, with d in metres (at least 1 m)."""
     d = np.maximum(np.asarray(distance_m, dtype=float), MIN_DISTANCE_M)
     return spreading_factor * 10 * np.log10(d) + thorp_absorption_db_per_km(f_khz) * d / 1000
@@ -70,8 +72,11 @@ def harvest_power_w(distance_m: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
     """Electrical power harvested by a node at `distance_m` from the AET projector."""
     sl = source_level_db(cfg.p_tx_w, cfg.eta_tx, cfg.di_tx_db)
     rl = sl - transmission_loss_db(distance_m, cfg.f_wet_khz, cfg.spreading_factor) + cfg.di_rx_db
-    return cfg.eta_harv * cfg.n_hydrophones * 10 ** ((rl + cfg.rvs_db) / 10) / (
-        4 * cfg.load_resistance_ohm
+    return (
+        cfg.eta_harv
+        * cfg.n_hydrophones
+        * 10 ** ((rl + cfg.rvs_db) / 10)
+        / (4 * cfg.load_resistance_ohm)
     )
 
 

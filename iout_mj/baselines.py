@@ -35,8 +35,9 @@ def _wrap(angle: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.mod(angle + np.pi, 2 * np.pi) - np.pi
 
 
-def steer(mission: Mission, targets_m: NDArray[np.float64],
-          speeds_mps: NDArray[np.float64]) -> tuple[IntArray, IntArray]:
+def steer(
+    mission: Mission, targets_m: NDArray[np.float64], speeds_mps: NDArray[np.float64]
+) -> tuple[IntArray, IntArray]:
     """Heading and speed indices that turn each AUV toward its target and toward a speed."""
     delta = targets_m - mission.positions_m
     want = np.arctan2(delta[:, 1], delta[:, 0])
@@ -143,7 +144,7 @@ class Planner:
         self._target: NDArray[np.int64] | None = None
 
     def __call__(self, mission: Mission) -> IntArray:
-        n, k = mission.n_auvs, mission.n_nodes
+        n, _k = mission.n_auvs, mission.n_nodes
         net = mission.network
         nodes = net.nodes_m
         slot_m = CRUISE_MPS * mission.cfg.scenario.slot_s
@@ -193,8 +194,12 @@ class Planner:
         return _pack(h, s, wet, data)
 
 
-POLICIES = {"greedy": Greedy, "round-robin": RoundRobin, "random-walk": RandomWalk,
-            "planner": Planner}
+POLICIES: dict[str, type[Policy]] = {
+    "greedy": Greedy,
+    "round-robin": RoundRobin,
+    "random-walk": RandomWalk,
+    "planner": Planner,
+}
 
 
 def make_policy(name: str, seed: int | None = 0) -> Policy:

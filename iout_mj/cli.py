@@ -16,7 +16,9 @@ def _positive_float(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number; accepted a distance > 0 m")
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a number; accepted a distance > 0 m"
+        ) from None
     if not np.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"{text!r} is not a positive distance; accepted > 0 m")
     return value
@@ -34,25 +36,39 @@ def cmd_link_budget(args: argparse.Namespace) -> int:
     cfg = _load_config(args.config).acoustics
     d = np.asarray(args.distance, dtype=float)
     rows = [
-        {"distance_m": float(di), "harvest_power_w": float(hp), "harvest_energy_j": float(he),
-         "uplink_power_w": float(up), "uplink_energy_j": float(ue)}
-        for di, hp, he, up, ue in zip(d, acoustics.harvest_power_w(d, cfg),
-                                      acoustics.harvest_energy_j(d, cfg),
-                                      acoustics.uplink_power_w(d, cfg),
-                                      acoustics.uplink_energy_j(d, cfg))
+        {
+            "distance_m": float(di),
+            "harvest_power_w": float(hp),
+            "harvest_energy_j": float(he),
+            "uplink_power_w": float(up),
+            "uplink_energy_j": float(ue),
+        }
+        for di, hp, he, up, ue in zip(
+            d,
+            acoustics.harvest_power_w(d, cfg),
+            acoustics.harvest_energy_j(d, cfg),
+            acoustics.uplink_power_w(d, cfg),
+            acoustics.uplink_energy_j(d, cfg),
+            strict=False,
+        )
     ]
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
-    print(f"AET at {cfg.f_wet_khz:g} kHz, P_tx {cfg.p_tx_w:g} W; uplink at {cfg.f_data_khz:g} kHz,"
-          f" {cfg.data_rate_bps / 1e3:g} kbit/s over {cfg.bandwidth_hz:g} Hz; "
-          f"slot {cfg.charging_s:g} s; noise '{cfg.noise_model}'")
-    print(f"{'distance m':>11} {'harvest W':>11} {'harvest J':>11} {'uplink W':>11} "
-          f"{'uplink J':>11}")
+    print(
+        f"AET at {cfg.f_wet_khz:g} kHz, P_tx {cfg.p_tx_w:g} W; uplink at {cfg.f_data_khz:g} kHz,"
+        f" {cfg.data_rate_bps / 1e3:g} kbit/s over {cfg.bandwidth_hz:g} Hz; "
+        f"slot {cfg.charging_s:g} s; noise '{cfg.noise_model}'"
+    )
+    print(
+        f"{'distance m':>11} {'harvest W':>11} {'harvest J':>11} {'uplink W':>11} {'uplink J':>11}"
+    )
     for r in rows:
-        print(f"{r['distance_m']:>11.1f} {r['harvest_power_w']:>11.4g} "
-              f"{r['harvest_energy_j']:>11.4g} {r['uplink_power_w']:>11.4g} "
-              f"{r['uplink_energy_j']:>11.4g}")
+        print(
+            f"{r['distance_m']:>11.1f} {r['harvest_power_w']:>11.4g} "
+            f"{r['harvest_energy_j']:>11.4g} {r['uplink_power_w']:>11.4g} "
+            f"{r['uplink_energy_j']:>11.4g}"
+        )
     return 0
 
 
@@ -74,10 +90,20 @@ def cmd_validate_energy(args: argparse.Namespace) -> int:
 def cmd_mission(args: argparse.Namespace) -> int:
     from iout_mj.missions import run_mission
 
-    summary = run_mission(policy=args.policy, n_auvs=args.n_auvs, n_nodes=args.nodes,
-                          backend=args.backend, seed=args.seed, out=Path(args.out),
-                          video=not args.no_video, width=args.width, height=args.height,
-                          fps=args.fps, config=args.config, slots=args.slots)
+    summary = run_mission(
+        policy=args.policy,
+        n_auvs=args.n_auvs,
+        n_nodes=args.nodes,
+        backend=args.backend,
+        seed=args.seed,
+        out=Path(args.out),
+        video=not args.no_video,
+        width=args.width,
+        height=args.height,
+        fps=args.fps,
+        config=args.config,
+        slots=args.slots,
+    )
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -87,8 +113,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("link-budget", help="AET harvest and uplink energy vs distance")
-    p.add_argument("--distance", type=_positive_float, nargs="+", default=[10, 100, 500],
-                   help="distances in metres (> 0)")
+    p.add_argument(
+        "--distance",
+        type=_positive_float,
+        nargs="+",
+        default=[10, 100, 500],
+        help="distances in metres (> 0)",
+    )
     p.add_argument("--json", action="store_true")
     p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
     p.set_defaults(func=cmd_link_budget)

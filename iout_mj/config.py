@@ -20,8 +20,19 @@ Point = tuple[float, float]
 PAPER_LAYOUTS: dict[int, tuple[Point, ...]] = {
     7: ((100, 100), (800, 500), (500, 900), (300, 700), (500, 200), (900, 200), (200, 400)),
     13: (
-        (100, 100), (800, 500), (500, 900), (300, 700), (200, 400), (900, 200), (500, 200),
-        (700, 800), (800, 200), (700, 300), (700, 100), (300, 100), (900, 700),
+        (100, 100),
+        (800, 500),
+        (500, 900),
+        (300, 700),
+        (200, 400),
+        (900, 200),
+        (500, 200),
+        (700, 800),
+        (800, 200),
+        (700, 300),
+        (700, 100),
+        (300, 100),
+        (900, 700),
     ),
 }
 # Start positions: the first two from the authors' code, the others continue the pattern.
@@ -70,16 +81,32 @@ class MotionConfig:
     battery_j: float = 2.0e6
 
     def __post_init__(self) -> None:
-        _positive(self, "v_max_mps", "drag_coefficient", "wetted_area_m2",
-                  "water_density_kgpm3", "dtheta_max_deg", "dv_max_mps", "battery_j")
+        _positive(
+            self,
+            "v_max_mps",
+            "drag_coefficient",
+            "wetted_area_m2",
+            "water_density_kgpm3",
+            "dtheta_max_deg",
+            "dv_max_mps",
+            "battery_j",
+        )
         _fraction(self, "prop_efficiency")
         _require(self.hotel_power_w >= 0, "hotel_power_w", self.hotel_power_w, "a number >= 0")
         for name in ("heading_levels", "speed_levels"):
             value = getattr(self, name)
-            _require(value >= 3 and value % 2 == 1, name, value,
-                     "an odd integer >= 3 (so that the middle level is 'no change')")
-        _require(0 <= self.initial_speed_mps <= self.v_max_mps, "initial_speed_mps",
-                 self.initial_speed_mps, f"a speed in [0, v_max_mps={self.v_max_mps}]")
+            _require(
+                value >= 3 and value % 2 == 1,
+                name,
+                value,
+                "an odd integer >= 3 (so that the middle level is 'no change')",
+            )
+        _require(
+            0 <= self.initial_speed_mps <= self.v_max_mps,
+            "initial_speed_mps",
+            self.initial_speed_mps,
+            f"a speed in [0, v_max_mps={self.v_max_mps}]",
+        )
 
     @property
     def drag_factor_nspm2(self) -> float:
@@ -118,14 +145,32 @@ class AcousticsConfig:
     """Wenz model surface wind speed."""
 
     def __post_init__(self) -> None:
-        _positive(self, "f_wet_khz", "f_data_khz", "p_tx_w", "spreading_factor",
-                  "load_resistance_ohm", "bandwidth_hz", "data_rate_bps", "charging_s", "data_s")
+        _positive(
+            self,
+            "f_wet_khz",
+            "f_data_khz",
+            "p_tx_w",
+            "spreading_factor",
+            "load_resistance_ohm",
+            "bandwidth_hz",
+            "data_rate_bps",
+            "charging_s",
+            "data_s",
+        )
         _fraction(self, "eta_tx", "eta_harv")
         _require(self.n_hydrophones >= 1, "n_hydrophones", self.n_hydrophones, "an integer >= 1")
-        _require(self.noise_model in ("flat", "wenz"), "noise_model", self.noise_model,
-                 "'flat' or 'wenz'")
-        _require(0 <= self.shipping_activity <= 1, "shipping_activity", self.shipping_activity,
-                 "a number in [0, 1]")
+        _require(
+            self.noise_model in ("flat", "wenz"),
+            "noise_model",
+            self.noise_model,
+            "'flat' or 'wenz'",
+        )
+        _require(
+            0 <= self.shipping_activity <= 1,
+            "shipping_activity",
+            self.shipping_activity,
+            "a number in [0, 1]",
+        )
         _require(self.wind_speed_mps >= 0, "wind_speed_mps", self.wind_speed_mps, "a number >= 0")
 
 
@@ -140,8 +185,12 @@ class NetworkConfig:
     def __post_init__(self) -> None:
         _require(self.k_reset >= 1, "k_reset", self.k_reset, "an integer >= 1")
         _require(self.aoi_max >= 1, "aoi_max", self.aoi_max, "a number >= 1")
-        _require(self.node_initial_energy_j >= 0, "node_initial_energy_j",
-                 self.node_initial_energy_j, "a number >= 0")
+        _require(
+            self.node_initial_energy_j >= 0,
+            "node_initial_energy_j",
+            self.node_initial_energy_j,
+            "a number >= 0",
+        )
 
 
 @dataclass(frozen=True)
@@ -191,8 +240,12 @@ class PhysicsConfig:
 
     def __post_init__(self) -> None:
         _require(0 < self.timestep_s <= 0.5, "timestep_s", self.timestep_s, "a number in (0, 0.5]")
-        _require(self.current_jitter_mps >= 0, "current_jitter_mps", self.current_jitter_mps,
-                 "a number >= 0")
+        _require(
+            self.current_jitter_mps >= 0,
+            "current_jitter_mps",
+            self.current_jitter_mps,
+            "a number >= 0",
+        )
 
 
 @dataclass(frozen=True)
@@ -216,28 +269,51 @@ class ScenarioConfig:
     def __post_init__(self) -> None:
         ax, ay = self.area_m
         _require(ax > 0 and ay > 0, "area_m", self.area_m, "two sides > 0 m")
-        _require(1 <= self.n_auvs <= MAX_AUVS, "n_auvs", self.n_auvs,
-                 f"an integer from 1 to {MAX_AUVS}")
+        _require(
+            1 <= self.n_auvs <= MAX_AUVS, "n_auvs", self.n_auvs, f"an integer from 1 to {MAX_AUVS}"
+        )
         k = len(self.nodes_m)
-        _require(MIN_NODES <= k <= MAX_NODES, "nodes_m", f"{k} nodes",
-                 f"{MIN_NODES} to {MAX_NODES} nodes")
+        _require(
+            MIN_NODES <= k <= MAX_NODES,
+            "nodes_m",
+            f"{k} nodes",
+            f"{MIN_NODES} to {MAX_NODES} nodes",
+        )
         for i, (x, y) in enumerate(self.nodes_m):
-            _require(0 <= x <= ax and 0 <= y <= ay, f"nodes_m[{i}]", (x, y), "a point inside area_m")
-        _require(len(self.starts_m) >= self.n_auvs, "starts_m", self.starts_m,
-                 f"at least n_auvs={self.n_auvs} points")
+            _require(
+                0 <= x <= ax and 0 <= y <= ay, f"nodes_m[{i}]", (x, y), "a point inside area_m"
+            )
+        _require(
+            len(self.starts_m) >= self.n_auvs,
+            "starts_m",
+            self.starts_m,
+            f"at least n_auvs={self.n_auvs} points",
+        )
         for i, (x, y) in enumerate(self.starts_m[: self.n_auvs]):
-            _require(0 < x < ax and 0 < y < ay, f"starts_m[{i}]", (x, y),
-                     "a point strictly inside area_m")
+            _require(
+                0 < x < ax and 0 < y < ay,
+                f"starts_m[{i}]",
+                (x, y),
+                "a point strictly inside area_m",
+            )
         dx, dy = self.dock_center_m
         r = self.dock_radius_m
         _require(r > 0, "dock_radius_m", r, "a radius > 0 m")
-        _require(r <= dx <= ax - r and r <= dy <= ay - r, "dock_center_m", self.dock_center_m,
-                 "a centre whose dock circle lies inside area_m")
+        _require(
+            r <= dx <= ax - r and r <= dy <= ay - r,
+            "dock_center_m",
+            self.dock_center_m,
+            "a centre whose dock circle lies inside area_m",
+        )
         _positive(self, "slot_s")
         _require(self.horizon_slots >= 1, "horizon_slots", self.horizon_slots, "an integer >= 1")
         _require(self.start_jitter_m >= 0, "start_jitter_m", self.start_jitter_m, "a number >= 0")
-        _require(self.start_heading_jitter_deg >= 0, "start_heading_jitter_deg",
-                 self.start_heading_jitter_deg, "a number >= 0")
+        _require(
+            self.start_heading_jitter_deg >= 0,
+            "start_heading_jitter_deg",
+            self.start_heading_jitter_deg,
+            "a number >= 0",
+        )
 
     @property
     def n_nodes(self) -> int:
@@ -312,7 +388,9 @@ def _convert(tp: Any, value: Any, name: str) -> Any:
             return tuple(_convert(args[0], v, f"{name}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(f"{name}={value!r} is invalid: accepted a list of {len(args)} values")
-        return tuple(_convert(a, v, f"{name}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+        return tuple(
+            _convert(a, v, f"{name}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
     if origin in (typing.Union, types.UnionType):
         raise ConfigError(f"{name}: union types are not supported in configs")
     if tp is float:
@@ -344,11 +422,20 @@ def _build(cls: Any, data: Any, name: str) -> Any:
     return cls(**kwargs)
 
 
-def random_layout(n_nodes: int, seed: int, scenario: ScenarioConfig | None = None,
-                  min_spacing_m: float = 80.0, margin_m: float = 50.0) -> tuple[Point, ...]:
+def random_layout(
+    n_nodes: int,
+    seed: int,
+    scenario: ScenarioConfig | None = None,
+    min_spacing_m: float = 80.0,
+    margin_m: float = 50.0,
+) -> tuple[Point, ...]:
     """Seeded node layout inside the area, `min_spacing_m` apart and outside the dock zone."""
-    _require(MIN_NODES <= n_nodes <= MAX_NODES, "n_nodes", n_nodes,
-             f"an integer from {MIN_NODES} to {MAX_NODES}")
+    _require(
+        MIN_NODES <= n_nodes <= MAX_NODES,
+        "n_nodes",
+        n_nodes,
+        f"an integer from {MIN_NODES} to {MAX_NODES}",
+    )
     sc = scenario or ScenarioConfig()
     rng = np.random.default_rng(seed)
     lo = np.array([margin_m, margin_m])
@@ -366,8 +453,13 @@ def random_layout(n_nodes: int, seed: int, scenario: ScenarioConfig | None = Non
     raise ConfigError(f"cannot place {n_nodes} nodes {min_spacing_m} m apart in area {sc.area_m}")
 
 
-def make_config(n_auvs: int = 2, n_nodes: int = 7, layout: str = "paper", seed: int = 0,
-                base: Config | None = None) -> Config:
+def make_config(
+    n_auvs: int = 2,
+    n_nodes: int = 7,
+    layout: str = "paper",
+    seed: int = 0,
+    base: Config | None = None,
+) -> Config:
     """A config with `n_auvs` AUVs and a node layout.
 
     Args:
@@ -379,8 +471,12 @@ def make_config(n_auvs: int = 2, n_nodes: int = 7, layout: str = "paper", seed: 
     """
     base = base or Config()
     if layout == "paper":
-        _require(n_nodes in PAPER_LAYOUTS, "n_nodes", n_nodes,
-                 f"{sorted(PAPER_LAYOUTS)} with layout='paper' (use layout='random' otherwise)")
+        _require(
+            n_nodes in PAPER_LAYOUTS,
+            "n_nodes",
+            n_nodes,
+            f"{sorted(PAPER_LAYOUTS)} with layout='paper' (use layout='random' otherwise)",
+        )
         nodes = PAPER_LAYOUTS[n_nodes]
     elif layout == "random":
         nodes = random_layout(n_nodes, seed, base.scenario)

@@ -21,8 +21,9 @@ def propulsion_power_w(speed_mps: ArrayLike, motion: MotionConfig) -> FloatArray
     return drag_power_w(speed_mps, motion) + motion.hotel_power_w
 
 
-def travel_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike,
-                    motion: MotionConfig) -> FloatArray:
+def travel_energy_j(
+    speed_mps: ArrayLike, distance_m: ArrayLike, motion: MotionConfig
+) -> FloatArray:
     """The cubic term of E_prop: drag power over the travel time d / v (0 when v = 0)."""
     v = np.asarray(speed_mps, dtype=float)
     d = np.asarray(distance_m, dtype=float)
@@ -30,8 +31,9 @@ def travel_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike,
     return np.where(v > 0, drag_power_w(v, motion) * d / safe_v, 0.0)
 
 
-def slot_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike, slot_s: float,
-                  motion: MotionConfig) -> FloatArray:
+def slot_energy_j(
+    speed_mps: ArrayLike, distance_m: ArrayLike, slot_s: float, motion: MotionConfig
+) -> FloatArray:
     """E_prop of one slot as the paper writes it (eq. 13): P_prop(v) * d / v.
 
     With d = v * slot (the paper's kinematics) this is P_prop(v) * slot. For v = 0 the travel
@@ -40,5 +42,6 @@ def slot_energy_j(speed_mps: ArrayLike, distance_m: ArrayLike, slot_s: float,
     v = np.asarray(speed_mps, dtype=float)
     d = np.asarray(distance_m, dtype=float)
     safe_v = np.where(v > 0, v, 1.0)
-    return np.where(v > 0, propulsion_power_w(v, motion) * d / safe_v,
-                    motion.hotel_power_w * slot_s)
+    return np.where(
+        v > 0, propulsion_power_w(v, motion) * d / safe_v, motion.hotel_power_w * slot_s
+    )

@@ -17,8 +17,13 @@ BACKENDS = ("mujoco", "kinematic")
 LAYOUTS = ("paper", "random")
 
 
-def resolve_config(config: Config | dict[str, Any] | str | Path | None, n_auvs: int | None,
-                   n_nodes: int | None, layout: str, layout_seed: int = 0) -> Config:
+def resolve_config(
+    config: Config | dict[str, Any] | str | Path | None,
+    n_auvs: int | None,
+    n_nodes: int | None,
+    layout: str,
+    layout_seed: int = 0,
+) -> Config:
     """A Config from a Config, a dict, a YAML/JSON path or None, with N, K and layout applied."""
     if config is None:
         base = Config()
@@ -59,20 +64,29 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         width, height: frame size for "rgb_array".
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}  # noqa: RUF012
     __doc__ = (__doc__ or "") + "\n" + OBSERVATION_DOC
 
-    def __init__(self, n_auvs: int | None = None, n_nodes: int | None = None,
-                 backend: str = "mujoco", layout: str = "paper", render_mode: str | None = None,
-                 config: Config | dict[str, Any] | str | Path | None = None,
-                 width: int = 640, height: int = 480):
-        EzPickle.__init__(self, n_auvs, n_nodes, backend, layout, render_mode, config, width,
-                          height)
+    def __init__(
+        self,
+        n_auvs: int | None = None,
+        n_nodes: int | None = None,
+        backend: str = "mujoco",
+        layout: str = "paper",
+        render_mode: str | None = None,
+        config: Config | dict[str, Any] | str | Path | None = None,
+        width: int = 640,
+        height: int = 480,
+    ):
+        EzPickle.__init__(
+            self, n_auvs, n_nodes, backend, layout, render_mode, config, width, height
+        )
         if backend not in BACKENDS:
             raise ValueError(f"backend={backend!r} is invalid: accepted one of {BACKENDS}")
         if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode={render_mode!r} is invalid: accepted None or "
-                             "'rgb_array'")
+            raise ValueError(
+                f"render_mode={render_mode!r} is invalid: accepted None or 'rgb_array'"
+            )
         self.cfg = resolve_config(config, n_auvs, n_nodes, layout)
         self.backend = backend
         self.render_mode = render_mode
@@ -90,8 +104,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
             self.mission = self._env.mission
         self.action_space = gym.spaces.MultiDiscrete(self.mission.action_high.copy())
         size = sum(self.mission.observation_sizes().values())
-        self.observation_space = gym.spaces.Box(OBS_LOW, OBS_HIGH, shape=(size,),
-                                                dtype=np.float32)
+        self.observation_space = gym.spaces.Box(OBS_LOW, OBS_HIGH, shape=(size,), dtype=np.float32)
         self._last_obs = np.zeros(size, dtype=np.float32)
         self._renderer: Any = None
 
@@ -103,8 +116,9 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
     def _flatten(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         return np.concatenate(list(obs.values())).astype(np.float32)
 
-    def reset(self, *, seed: int | None = None,
-              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         if seed is not None:
             target = self._env.task if self.backend == "mujoco" else self._env
@@ -121,19 +135,24 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         try:
             ts = self._env.step(action)
         except PhysicsError as exc:
-            info = {"error": f"physics diverged: {exc}", "metrics": self.mission.metrics(),
-                    "slot": self.mission.slot}
+            info: dict[str, Any] = {
+                "error": f"physics diverged: {exc}",
+                "metrics": self.mission.metrics(),
+                "slot": self.mission.slot,
+            }
             return self._last_obs.copy(), 0.0, True, False, info
         obs = self._flatten(ts.observation)
         if not np.all(np.isfinite(obs)):
-            info = {"error": "non-finite observation (diverged state)",
-                    "metrics": self.mission.metrics(), "slot": self.mission.slot}
+            info = {
+                "error": "non-finite observation (diverged state)",
+                "metrics": self.mission.metrics(),
+                "slot": self.mission.slot,
+            }
             return self._last_obs.copy(), 0.0, True, False, info
         self._last_obs = obs
         terminated = bool(ts.last() and ts.discount == 0.0)
         truncated = bool(ts.last() and not terminated)
-        info: dict[str, Any] = {"reward_terms": dict(self.mission.terms),
-                                "slot": self.mission.slot}
+        info = {"reward_terms": dict(self.mission.terms), "slot": self.mission.slot}
         if ts.last():
             info["metrics"] = self.mission.metrics()
         if self._renderer is not None:

@@ -8,10 +8,10 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from iout_mj.mission import Mission  # noqa: E402
+from iout_mj.mission import Mission
 
 AUV_COLORS = ["#e6a800", "#d62f9a", "#2ca02c", "#ff7f0e"]
 
@@ -20,24 +20,32 @@ def trajectory_figure(mission: Mission, path: Path, title: str = "") -> None:
     """AUV paths over the area, nodes (labelled with the data they delivered), dock zone."""
     sc = mission.cfg.scenario
     fig, ax = plt.subplots(figsize=(5.2, 5.2))
-    dock = plt.Circle(sc.dock_center_m, sc.dock_radius_m, color="tab:green", alpha=0.25,
-                      label="dock zone")
+    dock = plt.Circle(
+        sc.dock_center_m, sc.dock_radius_m, color="tab:green", alpha=0.25, label="dock zone"
+    )
     ax.add_patch(dock)
     pos = np.array(mission.log.positions_m)  # (slots + 1, N, 2)
     for i in range(mission.n_auvs):
-        ax.plot(pos[:, i, 0], pos[:, i, 1], "-", color=AUV_COLORS[i % 4], lw=1.6,
-                label=f"AUV {i + 1}")
+        ax.plot(
+            pos[:, i, 0], pos[:, i, 1], "-", color=AUV_COLORS[i % 4], lw=1.6, label=f"AUV {i + 1}"
+        )
         ax.plot(pos[0, i, 0], pos[0, i, 1], "o", color=AUV_COLORS[i % 4], ms=5)
         ax.plot(pos[-1, i, 0], pos[-1, i, 1], "s", color=AUV_COLORS[i % 4], ms=5)
     nodes = mission.network.nodes_m
     bits = mission.network.deliveries * mission.network.bits_per_delivery / 1e6
-    ax.scatter(nodes[:, 0], nodes[:, 1], s=60, c="tab:blue", marker="^", zorder=3,
-               label="nodes")
+    ax.scatter(nodes[:, 0], nodes[:, 1], s=60, c="tab:blue", marker="^", zorder=3, label="nodes")
     for k, (x, y) in enumerate(nodes):
-        ax.annotate(f"{bits[k]:.1f} Mbit", (x, y), textcoords="offset points", xytext=(5, 6),
-                    fontsize=7)
-    ax.set(xlim=(0, sc.area_m[0]), ylim=(0, sc.area_m[1]), xlabel="x (m)", ylabel="y (m)",
-           title=title, aspect="equal")
+        ax.annotate(
+            f"{bits[k]:.1f} Mbit", (x, y), textcoords="offset points", xytext=(5, 6), fontsize=7
+        )
+    ax.set(
+        xlim=(0, sc.area_m[0]),
+        ylim=(0, sc.area_m[1]),
+        xlabel="x (m)",
+        ylabel="y (m)",
+        title=title,
+        aspect="equal",
+    )
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -67,15 +75,25 @@ def results_figures(rows: list[dict[str, Any]], out: Path) -> list[Path]:
     """Jain and mean AoI vs K per policy and N (paper Fig. 2), energy per policy."""
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for key, ylabel, fname in (("jain", "Jain's fairness index", "fig2a_jain_vs_k.png"),
-                               ("mean_aoi", "mean AoI (slots)", "fig2b_aoi_vs_k.png")):
+    for key, ylabel, fname in (
+        ("jain", "Jain's fairness index", "fig2a_jain_vs_k.png"),
+        ("mean_aoi", "mean AoI (slots)", "fig2b_aoi_vs_k.png"),
+    ):
         fig, ax = plt.subplots(figsize=(5, 3.8))
         for policy, n in sorted({(r["policy"], r["n_auvs"]) for r in rows}):
-            sel = sorted((r for r in rows if r["policy"] == policy and r["n_auvs"] == n),
-                         key=lambda r: r["n_nodes"])
+            sel = sorted(
+                (r for r in rows if r["policy"] == policy and r["n_auvs"] == n),
+                key=lambda r: r["n_nodes"],
+            )
             k = [r["n_nodes"] for r in sel]
-            ax.errorbar(k, [r[key] for r in sel], yerr=[r[key + "_std"] for r in sel],
-                        marker="o", capsize=3, label=f"{policy}, N={n}")
+            ax.errorbar(
+                k,
+                [r[key] for r in sel],
+                yerr=[r[key + "_std"] for r in sel],
+                marker="o",
+                capsize=3,
+                label=f"{policy}, N={n}",
+            )
         ax.set(xlabel="number of nodes K", ylabel=ylabel)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
@@ -86,8 +104,10 @@ def results_figures(rows: list[dict[str, Any]], out: Path) -> list[Path]:
         paths.append(p)
     fig, ax = plt.subplots(figsize=(6, 3.6))
     labels = sorted({(r["policy"], r["n_auvs"]) for r in rows})
-    energy = [np.mean([r["propulsion_energy_j"] for r in rows
-                       if (r["policy"], r["n_auvs"]) == lab]) / 1e3 for lab in labels]
+    energy = [
+        np.mean([r["propulsion_energy_j"] for r in rows if (r["policy"], r["n_auvs"]) == lab]) / 1e3
+        for lab in labels
+    ]
     ax.bar([f"{p}\nN={n}" for p, n in labels], energy, color="tab:gray")
     ax.set(ylabel="propulsion energy per AUV (kJ)", title="Propulsion energy (mean over K)")
     ax.tick_params(axis="x", labelsize=7)

@@ -49,8 +49,14 @@ class KinematicEnvironment(dm_env.Environment):
         end[m.boundary_attempt] = start[m.boundary_attempt]
         travelled = np.linalg.norm(end - start, axis=1)
         prop = energy.travel_energy_j(speed, travelled, self.cfg.motion)
-        m.end_slot(end, np.mod(heading + np.pi, 2 * np.pi) - np.pi, speed, prop,
-                   np.zeros(m.n_auvs), self._min_separation(start, end))
+        m.end_slot(
+            end,
+            np.mod(heading + np.pi, 2 * np.pi) - np.pi,
+            speed,
+            prop,
+            np.zeros(m.n_auvs),
+            self._min_separation(start, end),
+        )
         obs = m.observation()
         if m.terminated:
             self._reset_next = True
@@ -69,9 +75,16 @@ class KinematicEnvironment(dm_env.Environment):
 
     def action_spec(self) -> specs.BoundedArray:
         high = self.mission.action_high
-        return specs.BoundedArray(shape=high.shape, dtype=np.int64, minimum=np.zeros_like(high),
-                                  maximum=high - 1, name="action")
+        return specs.BoundedArray(
+            shape=high.shape,
+            dtype=np.int64,
+            minimum=np.zeros_like(high),
+            maximum=high - 1,
+            name="action",
+        )
 
     def observation_spec(self) -> dict[str, specs.Array]:
-        return {k: specs.Array(shape=(n,), dtype=np.float64, name=k)
-                for k, n in self.mission.observation_sizes().items()}
+        return {
+            k: specs.Array(shape=(n,), dtype=np.float64, name=k)
+            for k, n in self.mission.observation_sizes().items()
+        }

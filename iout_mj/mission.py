@@ -33,8 +33,17 @@ from iout_mj.network import SensorNetwork, jain_index, pairwise_distance_m
 
 FloatArray = NDArray[np.float64]
 ACTION_FIELDS = ("heading", "speed", "aet_node", "uplink_node")
-REWARD_TERMS = ("docking_progress", "aoi", "fairness", "boundary", "stall", "energy_margin",
-                "infeasible_uplink", "collision", "docking")
+REWARD_TERMS = (
+    "docking_progress",
+    "aoi",
+    "fairness",
+    "boundary",
+    "stall",
+    "energy_margin",
+    "infeasible_uplink",
+    "collision",
+    "docking",
+)
 COLLISION_DISTANCE_M = 5.0
 """Two hulls (3 m long) closer than this count as a collision."""
 OBS_LOW, OBS_HIGH = -1.0, 2.0
@@ -75,10 +84,12 @@ class Mission:
         self.network = SensorNetwork(sc.nodes_m, cfg.network, cfg.acoustics)
         m = cfg.motion
         self.dtheta_rad = np.radians(m.dtheta_max_deg) * (
-            2 * np.arange(m.heading_levels) / (m.heading_levels - 1) - 1)
+            2 * np.arange(m.heading_levels) / (m.heading_levels - 1) - 1
+        )
         self.dv_mps = m.dv_max_mps * (2 * np.arange(m.speed_levels) / (m.speed_levels - 1) - 1)
-        self.action_high = np.tile([m.heading_levels, m.speed_levels, self.n_nodes,
-                                    self.n_nodes], self.n_auvs)
+        self.action_high = np.tile(
+            [m.heading_levels, m.speed_levels, self.n_nodes, self.n_nodes], self.n_auvs
+        )
         iu, ju = np.triu_indices(self.n_auvs, k=1)
         self._pairs = (iu, ju)
         self.log = MissionLog()
@@ -95,10 +106,12 @@ class Mission:
         start = start + rng.uniform(-1, 1, size=(n, 2)) * sc.start_jitter_m
         start = np.clip(start, 1.0, self.area_m - 1.0)
         heading = sc.start_heading_rad + rng.uniform(-1, 1, size=n) * np.radians(
-            sc.start_heading_jitter_deg)
+            sc.start_heading_jitter_deg
+        )
         speed = np.full(n, self.cfg.motion.initial_speed_mps)
         self.current_mps = np.asarray(self.cfg.physics.current_mps, dtype=float) + (
-            rng.uniform(-1, 1, size=2) * self.cfg.physics.current_jitter_mps)
+            rng.uniform(-1, 1, size=2) * self.cfg.physics.current_jitter_mps
+        )
         self.heading_sp = heading.copy()
         self.speed_sp = speed.copy()
         self.positions_m = start.copy()
@@ -131,18 +144,24 @@ class Mission:
             raise ActionError(
                 f"action has shape {a.shape}; accepted a flat array of {self.action_high.size} "
                 f"integers: (heading, speed, aet_node, uplink_node) for each of {self.n_auvs} "
-                "AUVs")
-        if a.dtype.kind not in "iu":
-            if a.dtype.kind != "f" or not np.all(np.isfinite(a)) or np.any(a != np.round(a)):
-                raise ActionError(f"action {a.tolist()} has non-integer entries; accepted "
-                                  "integer indices")
+                "AUVs"
+            )
+        integral = a.dtype.kind in "iu" or (
+            a.dtype.kind == "f" and np.all(np.isfinite(a)) and np.all(a == np.round(a))
+        )
+        if not integral:
+            raise ActionError(
+                f"action {a.tolist()} has non-integer entries; accepted integer indices"
+            )
         a = a.astype(np.int64)
         bad = (a < 0) | (a >= self.action_high)
         if bad.any():
             j = int(np.argmax(bad))
             auv, f = divmod(j, 4)
-            raise ActionError(f"AUV {auv}: {ACTION_FIELDS[f]} index {int(a[j])} is out of "
-                              f"range; accepted 0 to {int(self.action_high[j]) - 1}")
+            raise ActionError(
+                f"AUV {auv}: {ACTION_FIELDS[f]} index {int(a[j])} is out of "
+                f"range; accepted 0 to {int(self.action_high[j]) - 1}"
+            )
         return a.reshape(self.n_auvs, 4)
 
     def begin_slot(self, action: Any) -> tuple[FloatArray, FloatArray]:
@@ -152,18 +171,29 @@ class Mission:
         moving = ~self.docked
         self.heading_sp = self.heading_sp + np.where(moving, self.dtheta_rad[a[:, 0]], 0.0)
         self.speed_sp = np.where(
-            moving, np.clip(self.speed_sp + self.dv_mps[a[:, 1]], 0.0, self.cfg.motion.v_max_mps),
-            0.0)
+            moving,
+            np.clip(self.speed_sp + self.dv_mps[a[:, 1]], 0.0, self.cfg.motion.v_max_mps),
+            0.0,
+        )
         slot_s = self.cfg.scenario.slot_s
-        step = self.speed_sp[:, None] * slot_s * np.stack(
-            [np.cos(self.heading_sp), np.sin(self.heading_sp)], axis=1)
+        step = (
+            self.speed_sp[:, None]
+            * slot_s
+            * np.stack([np.cos(self.heading_sp), np.sin(self.heading_sp)], axis=1)
+        )
         end = self.positions_m + step
         self.boundary_attempt = moving & np.any((end < 0) | (end > self.area_m), axis=1)
         return self.heading_sp, self.speed_sp
 
-    def end_slot(self, positions_m: FloatArray, headings_rad: FloatArray, speeds_mps: FloatArray,
-                 propulsion_energy_j: FloatArray, yaw_energy_j: FloatArray,
-                 min_separation_m: float) -> float:
+    def end_slot(
+        self,
+        positions_m: FloatArray,
+        headings_rad: FloatArray,
+        speeds_mps: FloatArray,
+        propulsion_energy_j: FloatArray,
+        yaw_energy_j: FloatArray,
+        min_separation_m: float,
+    ) -> float:
         """Book one slot after the vehicles moved; returns the reward.
 
         Args:
@@ -193,17 +223,23 @@ class Mission:
         mean_aoi = self.network.mean_aoi
         jain = self.network.jain
         t = self.terms
-        t["docking_progress"] = w.docking_progress_per_m * float(np.sum(self.dock_dist_m - dock_dist))
+        progress_m = float(np.sum(self.dock_dist_m - dock_dist))
+        t["docking_progress"] = w.docking_progress_per_m * progress_m
         t["aoi"] = -w.aoi * mean_aoi
-        t["fairness"] = (-w.fairness * (1.0 - jain)
-                         if self.network.deliveries.sum() > w.fairness_min_deliveries else 0.0)
+        t["fairness"] = (
+            -w.fairness * (1.0 - jain)
+            if self.network.deliveries.sum() > w.fairness_min_deliveries
+            else 0.0
+        )
         t["boundary"] = -w.boundary * float(self.boundary_attempt.sum())
         t["stall"] = -w.stall * float(np.sum(active & (moved_m < w.stall_distance_m)))
-        margin = np.tanh((out.uplink_stored_j - out.uplink_req_j)
-                         / (out.uplink_req_j + w.margin_epsilon_j))
+        margin = np.tanh(
+            (out.uplink_stored_j - out.uplink_req_j) / (out.uplink_req_j + w.margin_epsilon_j)
+        )
         t["energy_margin"] = w.energy_margin / self.n_auvs * float(np.sum(margin[active]))
         t["infeasible_uplink"] = -w.infeasible_uplink * float(
-            np.sum(active & (out.uplink_stored_j < out.uplink_req_j)))
+            np.sum(active & (out.uplink_stored_j < out.uplink_req_j))
+        )
         t["collision"] = self._collision_term(positions_m)
         bonus = w.dock_first_entry * float(newly.sum())
         if self.docked.all() and not self.all_docked_paid:
@@ -228,7 +264,7 @@ class Mission:
         iu, ju = self._pairs
         d = np.linalg.norm(positions_m[iu] - positions_m[ju], axis=1)
         gap = np.maximum(0.0, w.safety_distance_m - d)
-        pen = 1.0 - np.exp(-gap**2 / (2 * w.collision_sigma_m**2))
+        pen = 1.0 - np.exp(-(gap**2) / (2 * w.collision_sigma_m**2))
         pen = np.where(self.docked[iu] & self.docked[ju], 0.0, pen)
         return -w.collision * float(pen.sum())
 
@@ -264,8 +300,9 @@ class Mission:
             "delivered_bits": self.network.delivered_bits,
             "propulsion_energy_j": self.propulsion_energy_j.tolist(),
             "yaw_energy_j": self.yaw_energy_j.tolist(),
-            "min_separation_m": (float(self.min_separation_m)
-                                 if np.isfinite(self.min_separation_m) else None),
+            "min_separation_m": (
+                float(self.min_separation_m) if np.isfinite(self.min_separation_m) else None
+            ),
             "docked": self.docked.tolist(),
             "mission_slots": self.slot,
             "collisions": self.collisions,
@@ -279,13 +316,15 @@ class Mission:
         d = pairwise_distance_m(self.positions_m, self.network.nodes_m)
         return {
             "auv_position": (self.positions_m / self.area_m).ravel(),
-            "auv_heading": np.stack([np.cos(self.headings_rad),
-                                     np.sin(self.headings_rad)], axis=1).ravel(),
+            "auv_heading": np.stack(
+                [np.cos(self.headings_rad), np.sin(self.headings_rad)], axis=1
+            ).ravel(),
             "auv_speed": self.speeds_mps / self.cfg.motion.v_max_mps,
             "docked": self.docked.astype(float),
             "aoi": self.network.aoi / self.cfg.network.aoi_max,
             "node_energy": np.minimum(
-                np.log10(1 + self.network.energy_j / ENERGY_OBS_REF_J) / 5, OBS_HIGH),
+                np.log10(1 + self.network.energy_j / ENERGY_OBS_REF_J) / 5, OBS_HIGH
+            ),
             "distance": (d / float(np.hypot(*self.area_m))).ravel(),
             "dock_distance": self.dock_dist_m / float(np.hypot(*self.area_m)),
             "time_remaining": np.array([1 - self.slot / sc.horizon_slots]),
@@ -293,9 +332,17 @@ class Mission:
 
     def observation_sizes(self) -> dict[str, int]:
         n, k = self.n_auvs, self.n_nodes
-        return {"auv_position": 2 * n, "auv_heading": 2 * n, "auv_speed": n, "docked": n,
-                "aoi": k, "node_energy": k, "distance": n * k, "dock_distance": n,
-                "time_remaining": 1}
+        return {
+            "auv_position": 2 * n,
+            "auv_heading": 2 * n,
+            "auv_speed": n,
+            "docked": n,
+            "aoi": k,
+            "node_energy": k,
+            "distance": n * k,
+            "dock_distance": n,
+            "time_remaining": 1,
+        }
 
 
 OBSERVATION_DOC = """\
@@ -313,4 +360,3 @@ The paper's state is positions, headings, speeds, AoI, node energies and distanc
 dock distance and remaining time are added because the docking deadline makes them part of
 the Markov state.
 """
-

@@ -62,10 +62,20 @@ def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> dict[s
             return metrics
 
 
-def run_mission(policy: str = "planner", n_auvs: int = 2, n_nodes: int = 7,
-                backend: str = "mujoco", seed: int = 0, out: Path = Path("renders"),
-                video: bool = True, width: int = 960, height: int = 540, fps: int = 30,
-                config: str | None = None, slots: int | None = None) -> dict[str, Any]:
+def run_mission(
+    policy: str = "planner",
+    n_auvs: int = 2,
+    n_nodes: int = 7,
+    backend: str = "mujoco",
+    seed: int = 0,
+    out: Path = Path("renders"),
+    video: bool = True,
+    width: int = 960,
+    height: int = 540,
+    fps: int = 30,
+    config: str | None = None,
+    slots: int | None = None,
+) -> dict[str, Any]:
     """Fly one mission and write `mission.json`, `mission_trajectory.png`, and (with `video`)
     `mission.mp4` plus its last frame `mission.png` into `out`."""
     import dataclasses
@@ -78,12 +88,21 @@ def run_mission(policy: str = "planner", n_auvs: int = 2, n_nodes: int = 7,
             raise ValueError(f"slots={slots}: accepted an integer >= 1")
         cfg = cfg.replace(scenario=dataclasses.replace(cfg.scenario, horizon_slots=slots))
     out.mkdir(parents=True, exist_ok=True)
-    env = gym.make(ENV_ID, backend=backend, config=cfg,
-                   render_mode="rgb_array" if video else None, width=width, height=height)
+    env = gym.make(
+        ENV_ID,
+        backend=backend,
+        config=cfg,
+        render_mode="rgb_array" if video else None,
+        width=width,
+        height=height,
+    )
     act = load_policy(policy, env, seed)
     writer = None
-    bar = tqdm(total=cfg.scenario.horizon_slots, desc=f"mission {policy} N={n_auvs} K={n_nodes}",
-               unit="slot")
+    bar = tqdm(
+        total=cfg.scenario.horizon_slots,
+        desc=f"mission {policy} N={n_auvs} K={n_nodes}",
+        unit="slot",
+    )
     start = time.perf_counter()
     frames = 0
     if video:
@@ -100,7 +119,7 @@ def run_mission(policy: str = "planner", n_auvs: int = 2, n_nodes: int = 7,
         nonlocal frames, last
         bar.update(1)
         if writer is not None:
-            renderer = env.unwrapped._renderer
+            renderer = env.unwrapped._renderer  # type: ignore[attr-defined]
             last = renderer.take_frames()
             for f in last:
                 writer.add_image(f)
@@ -119,11 +138,19 @@ def run_mission(policy: str = "planner", n_auvs: int = 2, n_nodes: int = 7,
         mediapy.write_image(out / "mission.png", last[-1])
     from iout_mj.figures import trajectory_figure
 
-    trajectory_figure(env.unwrapped.mission, out / "mission_trajectory.png",
-                      title=f"{policy}, N={n_auvs}, K={n_nodes}, {backend}")
-    summary = {"policy": policy, "n_auvs": n_auvs, "n_nodes": n_nodes, "backend": backend,
-               "seed": seed, "metrics": metrics, "video_frames": frames,
-               "wall_clock_s": round(elapsed, 2)}
+    mission = env.unwrapped.mission  # type: ignore[attr-defined]
+    title = f"{policy}, N={n_auvs}, K={n_nodes}, {backend}"
+    trajectory_figure(mission, out / "mission_trajectory.png", title=title)
+    summary = {
+        "policy": policy,
+        "n_auvs": n_auvs,
+        "n_nodes": n_nodes,
+        "backend": backend,
+        "seed": seed,
+        "metrics": metrics,
+        "video_frames": frames,
+        "wall_clock_s": round(elapsed, 2),
+    }
     (out / "mission.json").write_text(json.dumps(summary, indent=2) + "\n")
     env.close()
     return summary

@@ -28,7 +28,7 @@ INITIAL_AOI = 1.0
 
 
 def jain_index(counts: ArrayLike) -> float:
-    """Jain's index (sum o)^2 / (K sum o^2); 0 when nothing was delivered (no service, no fairness)."""
+    """Jain's index (sum o)^2 / (K sum o^2); 0 when nothing was delivered (no service)."""
     o = np.asarray(counts, dtype=float)
     sq = float(np.dot(o, o))
     return 0.0 if sq == 0 else float(o.sum() ** 2 / (o.size * sq))
@@ -97,8 +97,9 @@ class SensorNetwork:
     def mean_aoi(self) -> float:
         return float(self.aoi.mean())
 
-    def step(self, auv_xy: ArrayLike, wet_nodes: ArrayLike, data_nodes: ArrayLike,
-             active: ArrayLike) -> SlotOutcome:
+    def step(
+        self, auv_xy: ArrayLike, wet_nodes: ArrayLike, data_nodes: ArrayLike, active: ArrayLike
+    ) -> SlotOutcome:
         """Advance one slot.
 
         Args:

@@ -27,6 +27,19 @@ def _sensor_adr(model: mujoco.MjModel, name: str) -> int:
     return int(model.sensor_adr[model.sensor(name).id])
 
 
+def joint_addresses(
+    model: mujoco.MjModel, n_auvs: int, field: str = "jnt_qposadr"
+) -> NDArray[np.int64]:
+    """(3, N) qpos (or, with field='jnt_dofadr', dof) addresses of every AUV's x, y, yaw."""
+    return np.array(
+        [
+            [getattr(model, field)[model.joint(names.auv_prefix(i) + j).id] for i in range(n_auvs)]
+            for j in (names.JOINT_X, names.JOINT_Y, names.JOINT_YAW)
+        ],
+        dtype=np.int64,
+    )
+
+
 class AUVPhysics(engine.Physics):
     """Physics of one scene built by `vehicle.build_scene`."""
 
@@ -44,24 +57,29 @@ class AUVPhysics(engine.Physics):
         self.n_auvs = n
         self.dt_s = float(m.opt.timestep)
 
-        def joint(i: int, j: str) -> int:
-            return m.joint(names.auv_prefix(i) + j).id
-
-        self._qx = np.array([m.jnt_qposadr[joint(i, names.JOINT_X)] for i in range(n)])
-        self._qy = np.array([m.jnt_qposadr[joint(i, names.JOINT_Y)] for i in range(n)])
-        self._qyaw = np.array([m.jnt_qposadr[joint(i, names.JOINT_YAW)] for i in range(n)])
-        self._vx = np.array([m.jnt_dofadr[joint(i, names.JOINT_X)] for i in range(n)])
-        self._vy = np.array([m.jnt_dofadr[joint(i, names.JOINT_Y)] for i in range(n)])
-        self._vyaw = np.array([m.jnt_dofadr[joint(i, names.JOINT_YAW)] for i in range(n)])
-        self._thrust = np.array([m.actuator(names.auv_prefix(i) + names.THRUST).id
-                                 for i in range(n)])
-        self._yaw_act = np.array([m.actuator(names.auv_prefix(i) + names.YAW_ACTUATOR).id
-                                  for i in range(n)])
-        pairs = [(names.THRUST + "_force", names.THRUST + "_velocity"),
-                 (names.YAW_ACTUATOR + "_force", names.YAW_ACTUATOR + "_velocity")]
+        self._qx, self._qy, self._qyaw = joint_addresses(m, n)
+        self._vx, self._vy, self._vyaw = joint_addresses(m, n, "jnt_dofadr")
+        self._thrust = np.array(
+            [m.actuator(names.auv_prefix(i) + names.THRUST).id for i in range(n)]
+        )
+        self._yaw_act = np.array(
+            [m.actuator(names.auv_prefix(i) + names.YAW_ACTUATOR).id for i in range(n)]
+        )
+        pairs = [
+            (names.THRUST + "_force", names.THRUST + "_velocity"),
+            (names.YAW_ACTUATOR + "_force", names.YAW_ACTUATOR + "_velocity"),
+        ]
         self._power_sensors = np.array(
-            [[[_sensor_adr(m, names.auv_prefix(i) + f), _sensor_adr(m, names.auv_prefix(i) + v)]
-              for f, v in pairs] for i in range(n)]
+            [
+                [
+                    [
+                        _sensor_adr(m, names.auv_prefix(i) + f),
+                        _sensor_adr(m, names.auv_prefix(i) + v),
+                    ]
+                    for f, v in pairs
+                ]
+                for i in range(n)
+            ]
         )  # (N, 2 actuators, 2: force/velocity)
         self._nstate = mujoco.mj_stateSize(m, _STATE_SPEC)
         self._state0 = np.empty((1, self._nstate))
@@ -116,8 +134,7 @@ class AUVPhysics(engine.Physics):
         """Heading (unwrapped) and speed setpoints for the low-level servos."""
         ctrl = self.data.ctrl
         ctrl[self._yaw_act] = yaw_setpoint_rad
-        ctrl[self._thrust] = vehicle.thrust_command(np.asarray(speed_setpoint_mps),
-                                                    self.cfg.motion)
+        ctrl[self._thrust] = vehicle.thrust_command(np.asarray(speed_setpoint_mps), self.cfg.motion)
 
     def set_poses(self, xy_m: FloatArray, yaw_rad: FloatArray, speed_mps: FloatArray) -> None:
         """Place every AUV, moving at `speed_mps` along its heading, and zero the meters."""
@@ -136,15 +153,25 @@ class AUVPhysics(engine.Physics):
         """Advance `nstep` substeps in C and integrate actuator power over each of them."""
         m, d = self.model.ptr, self.data.ptr
         if nstep not in self._buffers:
-            self._buffers[nstep] = (np.empty((1, nstep, m.nu)),
-                                    np.empty((1, nstep, self._nstate)),
-                                    np.empty((1, nstep, m.nsensordata)))
+            self._buffers[nstep] = (
+                np.empty((1, nstep, m.nu)),
+                np.empty((1, nstep, self._nstate)),
+                np.empty((1, nstep, m.nsensordata)),
+            )
         ctrl, state, sensordata = self._buffers[nstep]
         ctrl[:] = d.ctrl
         mujoco.mj_getState(m, d, self._state0[0], _STATE_SPEC)
         with self.check_invalid_state():
-            self._rollout.rollout([m], [d], self._state0, ctrl, nstep=nstep, skip_checks=True,
-                                  state=state, sensordata=sensordata)
+            self._rollout.rollout(
+                [m],
+                [d],
+                self._state0,
+                ctrl,
+                nstep=nstep,
+                skip_checks=True,
+                state=state,
+                sensordata=sensordata,
+            )
         sd = sensordata[0]
         force = sd[:, self._power_sensors[..., 0]]
         velocity = sd[:, self._power_sensors[..., 1]]

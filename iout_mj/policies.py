@@ -23,12 +23,15 @@ def resolve_policy_path(name: str) -> Path:
     if path.is_file():
         return path
     available = sorted(p.name for p in SHIPPED_DIR.glob("*") if (p / "model.zip").is_file())
-    raise PolicyError(f"unknown policy {name!r}: accepted greedy, round-robin, random-walk, "
-                      f"planner, a shipped policy {available}, or a policy file (.zip)")
+    raise PolicyError(
+        f"unknown policy {name!r}: accepted greedy, round-robin, random-walk, "
+        f"planner, a shipped policy {available}, or a policy file (.zip)"
+    )
 
 
 def load_trained_policy(name: str, env: Any) -> Any:
     """A callable `policy(env, obs) -> action` for a trained PPO policy."""
+    path = resolve_policy_path(name)
     from iout_mj.training import load_for_env
 
-    return load_for_env(resolve_policy_path(name), env)
+    return load_for_env(path, env)

@@ -6,6 +6,7 @@ Nothing here runs unless a frame is asked for: an env without `render_mode` neve
 
 from __future__ import annotations
 
+import itertools
 import os
 from typing import Any
 
@@ -15,10 +16,11 @@ from numpy.typing import NDArray
 from PIL import Image, ImageDraw, ImageFont
 
 from iout_mj import names, vehicle
-from iout_mj.physics import wrap_angle
+from iout_mj.physics import joint_addresses, wrap_angle
 
-AUV_COLORS = np.array([[1.0, 0.85, 0.1, 1], [1.0, 0.3, 0.8, 1], [0.3, 1.0, 0.4, 1],
-                       [1.0, 0.5, 0.1, 1]])
+AUV_COLORS = np.array(
+    [[1.0, 0.85, 0.1, 1], [1.0, 0.3, 0.8, 1], [0.3, 1.0, 0.4, 1], [1.0, 0.5, 0.1, 1]]
+)
 AET_COLOR = np.array([1.0, 0.55, 0.0, 0.9])
 UPLINK_COLOR = np.array([0.1, 0.95, 1.0, 0.9])
 DIM = np.array([0.45, 0.45, 0.45, 0.35])
@@ -38,19 +40,21 @@ def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
     backend = os.environ.get("MUJOCO_GL", "")
     try:
         return mujoco.Renderer(model, height, width, max_geom=20000)
-    except Exception as exc:  # noqa: BLE001 - each GL backend fails in its own way
+    except Exception as exc:
         note = f" ({iout_mj.GL_NOTE})" if iout_mj.GL_NOTE else ""
         raise RenderError(
             f"offscreen rendering failed with MUJOCO_GL={backend!r}{note}: "
             f"{type(exc).__name__}: {exc}. Headless rendering needs Mesa's EGL (Debian: "
-            "libegl-mesa0 libegl1) or OSMesa (libosmesa6); set MUJOCO_GL=egl or osmesa.") from exc
+            "libegl-mesa0 libegl1) or OSMesa (libosmesa6); set MUJOCO_GL=egl or osmesa."
+        ) from exc
 
 
 def aoi_color(aoi_frac: NDArray[np.float64]) -> NDArray[np.float64]:
     """Green (fresh) to red (stale) for AoI / A_max in [0, 1]."""
     a = np.clip(aoi_frac, 0, 1)[:, None]
-    return np.concatenate([0.15 + 0.85 * a, 0.85 - 0.7 * a, 0.2 * np.ones_like(a),
-                           np.ones_like(a)], axis=1)
+    return np.concatenate(
+        [0.15 + 0.85 * a, 0.85 - 0.7 * a, 0.2 * np.ones_like(a), np.ones_like(a)], axis=1
+    )
 
 
 class MissionRenderer:
@@ -79,12 +83,7 @@ class MissionRenderer:
         self.top = make_renderer(self.model, height, self.top_size)
         chase_w = width - self.top_size
         self.chase = make_renderer(self.model, height, chase_w) if chase_w >= 64 else None
-        m = self.model
-        n = self.mission.n_auvs
-        self._qx = [m.jnt_qposadr[m.joint(names.auv_prefix(i) + names.JOINT_X).id] for i in range(n)]
-        self._qy = [m.jnt_qposadr[m.joint(names.auv_prefix(i) + names.JOINT_Y).id] for i in range(n)]
-        self._qyaw = [m.jnt_qposadr[m.joint(names.auv_prefix(i) + names.JOINT_YAW).id]
-                      for i in range(n)]
+        self._qx, self._qy, self._qyaw = joint_addresses(self.model, self.mission.n_auvs)
         self._chase_cam = names.auv_prefix(0) + names.CHASE_CAMERA
         self._font = ImageFont.load_default()
         self.reset()
@@ -105,8 +104,10 @@ class MissionRenderer:
         if self._physics is not None:
             q = self._physics.substep_qpos
             idx = np.linspace(0, len(q) - 1, k + 1)[1:].round().astype(int)
-            return [(np.stack([q[i, self._qx], q[i, self._qy]], axis=1),
-                     np.asarray(q[i, self._qyaw])) for i in idx]
+            return [
+                (np.stack([q[i, self._qx], q[i, self._qy]], axis=1), np.asarray(q[i, self._qyaw]))
+                for i in idx
+            ]
         (p0, h0), (p1, h1) = self._slot_start_pose, self._pose_now()
         dh = wrap_angle(h1 - h0)
         return [(p0 + (p1 - p0) * f, h0 + dh * f) for f in np.arange(1, k + 1) / k]
@@ -158,17 +159,30 @@ class MissionRenderer:
         scene.ngeom += 1
         return g
 
-    def _line(self, scene: mujoco.MjvScene, a: NDArray[np.float64], b: NDArray[np.float64],
-              rgba: NDArray[np.float64], width: float) -> None:
+    def _line(
+        self,
+        scene: mujoco.MjvScene,
+        a: NDArray[np.float64],
+        b: NDArray[np.float64],
+        rgba: NDArray[np.float64],
+        width: float,
+    ) -> None:
         g = self._add(scene)
         if g is None:
             return
-        mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_LINE, np.zeros(3), np.zeros(3),
-                            np.eye(3).ravel(), rgba.astype(np.float32))
+        mujoco.mjv_initGeom(
+            g,
+            mujoco.mjtGeom.mjGEOM_LINE,
+            np.zeros(3),
+            np.zeros(3),
+            np.eye(3).ravel(),
+            rgba.astype(np.float32),
+        )
         mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_LINE, width, a, b)
 
-    def _decorate(self, scene: mujoco.MjvScene, xy: NDArray[np.float64],
-                  yaw: NDArray[np.float64], top: bool) -> None:
+    def _decorate(
+        self, scene: mujoco.MjvScene, xy: NDArray[np.float64], yaw: NDArray[np.float64], top: bool
+    ) -> None:
         mission, net = self.mission, self.mission.network
         z_auv = vehicle.AUV_DEPTH_M
         z_bed = vehicle.SEABED_DEPTH_M + 4.5
@@ -180,9 +194,14 @@ class MissionRenderer:
             g = self._add(scene)
             if g is None:
                 break
-            mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_CYLINDER,
-                                np.array([radius[k], radius[k], 1.5]), np.array([x, y, z_bed]),
-                                np.eye(3).ravel(), colors[k].astype(np.float32))
+            mujoco.mjv_initGeom(
+                g,
+                mujoco.mjtGeom.mjGEOM_CYLINDER,
+                np.array([radius[k], radius[k], 1.5]),
+                np.array([x, y, z_bed]),
+                np.eye(3).ravel(),
+                colors[k].astype(np.float32),
+            )
         # Links of the slot being shown: AET (orange) and uplink (cyan, grey if it failed).
         log = mission.log
         if log.aet_nodes:
@@ -194,15 +213,20 @@ class MissionRenderer:
                 q_aet = np.array([*net.nodes_m[aet[i]], z_bed])
                 q_up = np.array([*net.nodes_m[up[i]], z_bed + 1])
                 self._line(scene, p, q_aet, AET_COLOR, LINK_WIDTH_PX)
-                self._line(scene, p + [0, 0, 1], q_up, UPLINK_COLOR if ok[i] else DIM,
-                           LINK_WIDTH_PX)
+                self._line(
+                    scene,
+                    p + np.array([0.0, 0.0, 1.0]),
+                    q_up,
+                    UPLINK_COLOR if ok[i] else DIM,
+                    LINK_WIDTH_PX,
+                )
         # Trails and (top view) large heading markers, since a 3 m hull is a few pixels there.
         for i in range(mission.n_auvs):
             trail = self.trails[i][-TRAIL_POINTS:]
             step = max(1, len(trail) // 200)
             pts = trail[::step] + ([trail[-1]] if trail else [])
             color = AUV_COLORS[i % len(AUV_COLORS)]
-            for a, b in zip(pts[:-1], pts[1:]):
+            for a, b in itertools.pairwise(pts):
                 self._line(scene, np.array([*a, z_auv]), np.array([*b, z_auv]), color, 2.0)
             if top:
                 g = self._add(scene)
@@ -210,12 +234,17 @@ class MissionRenderer:
                     break
                 c, s = np.cos(yaw[i]), np.sin(yaw[i])
                 mat = np.array([[0, -s, c], [0, c, s], [-1, 0, 0]], dtype=float)
-                mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_ARROW,
-                                    np.array([12.0, 12.0, MARKER_LENGTH_M]),
-                                    np.array([xy[i, 0], xy[i, 1], z_auv]), mat.ravel(),
-                                    color.astype(np.float32))
+                mujoco.mjv_initGeom(
+                    g,
+                    mujoco.mjtGeom.mjGEOM_ARROW,
+                    np.array([12.0, 12.0, MARKER_LENGTH_M]),
+                    np.array([xy[i, 0], xy[i, 1], z_auv]),
+                    mat.ravel(),
+                    color.astype(np.float32),
+                )
 
     def _overlay(self, img: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """Text on the chase view (or on the top view when there is no chase view)."""
         m = self.mission
         slot_s = self.cfg.scenario.slot_s
         energy_kj = ", ".join(f"{e / 1e3:.0f}" for e in m.propulsion_energy_j)
@@ -225,17 +254,17 @@ class MissionRenderer:
             f"data {m.network.delivered_bits / 1e6:6.1f} Mbit",
             f"energy/AUV {energy_kj} kJ",
             "docked " + " ".join("Y" if d else "-" for d in m.docked),
+            "orange AET, cyan uplink (grey: failed)",
+            "node colour: AoI, size: stored energy",
         ]
+        x0 = self.top_size if self.chase is not None else 0
         image = Image.fromarray(img)
         draw = ImageDraw.Draw(image)
-        pad = 6
-        box_h = 14 * len(lines) + 2 * pad
-        draw.rectangle([0, 0, 250, box_h], fill=(0, 0, 0))
+        pad, line_h = 4, 12
+        width = min(img.shape[1] - x0, 240)
+        draw.rectangle([x0, 0, x0 + width, line_h * len(lines) + 2 * pad], fill=(0, 0, 0))
         for j, text in enumerate(lines):
-            draw.text((pad, pad + 14 * j), text, fill=(255, 255, 255), font=self._font)
-        legend = "orange: AET   cyan: uplink   grey: failed uplink   node colour: AoI"
-        draw.rectangle([0, img.shape[0] - 18, 8 * len(legend) // 1.3, img.shape[0]], fill=(0, 0, 0))
-        draw.text((pad, img.shape[0] - 15), legend, fill=(230, 230, 230), font=self._font)
+            draw.text((x0 + pad, pad + line_h * j), text, fill=(255, 255, 255), font=self._font)
         return np.asarray(image)
 
     def close(self) -> None:

@@ -36,8 +36,13 @@ class DataCollectionTask(base.Task):
 
     def action_spec(self, physics: AUVPhysics) -> specs.BoundedArray:
         high = self.mission.action_high
-        return specs.BoundedArray(shape=high.shape, dtype=np.int64, minimum=np.zeros_like(high),
-                                  maximum=high - 1, name="action")
+        return specs.BoundedArray(
+            shape=high.shape,
+            dtype=np.int64,
+            minimum=np.zeros_like(high),
+            maximum=high - 1,
+            name="action",
+        )
 
     def before_step(self, action: Any, physics: AUVPhysics) -> None:
         heading_sp, speed_sp = self.mission.begin_slot(action)
@@ -46,9 +51,14 @@ class DataCollectionTask(base.Task):
 
     def after_step(self, physics: AUVPhysics) -> None:
         mech = (physics.mech_energy_j - self._energy_before) / self.cfg.motion.prop_efficiency
-        self.mission.end_slot(physics.positions_m(), physics.headings_rad(),
-                              physics.speeds_mps(), mech[:, 0], mech[:, 1],
-                              _min_separation_m(physics))
+        self.mission.end_slot(
+            physics.positions_m(),
+            physics.headings_rad(),
+            physics.speeds_mps(),
+            mech[:, 0],
+            mech[:, 1],
+            _min_separation_m(physics),
+        )
 
     def get_observation(self, physics: AUVPhysics) -> dict[str, np.ndarray]:
         return self.mission.observation()
@@ -73,13 +83,15 @@ def _min_separation_m(physics: AUVPhysics) -> float:
     return float(np.linalg.norm(xy[:, iu] - xy[:, ju], axis=2).min())
 
 
-def make_environment(cfg: Config, seed: int | None = None,
-                     random_layout: bool = False) -> control.Environment:
+def make_environment(
+    cfg: Config, seed: int | None = None, random_layout: bool = False
+) -> control.Environment:
     """The dm_control environment: AUVPhysics + DataCollectionTask, one slot per step."""
     physics = AUVPhysics.from_config(cfg)
     task = DataCollectionTask(cfg, random=seed, random_layout=random_layout)
     n_sub = round(cfg.scenario.slot_s / physics.dt_s)
     if abs(n_sub * physics.dt_s - cfg.scenario.slot_s) > 1e-9 * cfg.scenario.slot_s:
-        raise ValueError(f"slot_s={cfg.scenario.slot_s} is not a multiple of "
-                         f"physics timestep_s={physics.dt_s}")
+        raise ValueError(
+            f"slot_s={cfg.scenario.slot_s} is not a multiple of physics timestep_s={physics.dt_s}"
+        )
     return control.Environment(physics, task, n_sub_steps=n_sub, legacy_step=False)

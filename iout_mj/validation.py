@@ -55,8 +55,14 @@ def _mission_maneuver() -> Maneuver:
         speeds.append(float(env.mission.speed_sp[0]))
         if ts.last():
             break
-    return Maneuver("mission (planner, K=7)", 1.0, tuple(headings), tuple(speeds),
-                    (float(start[0]), float(start[1])), start_heading)
+    return Maneuver(
+        "mission (planner, K=7)",
+        1.0,
+        tuple(headings),
+        tuple(speeds),
+        (float(start[0]), float(start[1])),
+        start_heading,
+    )
 
 
 def maneuvers() -> list[Maneuver]:
@@ -91,9 +97,15 @@ def steady_state(cfg: Config, speeds_mps: tuple[float, ...] = STEADY_SPEEDS_MPS)
         measured = (physics.mech_energy_j.sum() - before) / MEASURE_S / m.prop_efficiency
         measured += m.hotel_power_w
         model = float(energy.propulsion_power_w(v, m))
-        rows.append({"speed_mps": float(v), "measured_power_w": float(measured),
-                     "model_power_w": model, "rel_error": float((measured - model) / model),
-                     "measured_speed_mps": float(physics.surge_mps()[0])})
+        rows.append(
+            {
+                "speed_mps": float(v),
+                "measured_power_w": float(measured),
+                "model_power_w": model,
+                "rel_error": float((measured - model) / model),
+                "measured_speed_mps": float(physics.surge_mps()[0]),
+            }
+        )
     physics.free()
     return rows
 
@@ -103,10 +115,13 @@ def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
     physics = _physics(cfg, dt_s)
     m, slot_s = cfg.motion, cfg.scenario.slot_s
     nstep = round(slot_s / physics.dt_s)
-    physics.set_poses(np.array([man.start_m]), np.radians([man.start_heading_deg]),
-                      np.array([man.start_speed_mps]))
+    physics.set_poses(
+        np.array([man.start_m]),
+        np.radians([man.start_heading_deg]),
+        np.array([man.start_speed_mps]),
+    )
     measured, model, distance, ends = [], [], [], []
-    for heading_deg, speed in zip(man.heading_deg, man.speed_mps):
+    for heading_deg, speed in zip(man.heading_deg, man.speed_mps, strict=False):
         start = physics.positions_m()[0]
         before = physics.mech_energy_j.sum()
         physics.set_commands(np.radians([heading_deg]), np.array([speed]))
@@ -119,8 +134,12 @@ def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
         distance.append(d)
         ends.append(end.copy())
     physics.free()
-    return {"measured_j": np.array(measured), "model_j": np.array(model),
-            "distance_m": np.array(distance), "end_m": np.array(ends)}
+    return {
+        "measured_j": np.array(measured),
+        "model_j": np.array(model),
+        "distance_m": np.array(distance),
+        "end_m": np.array(ends),
+    }
 
 
 def timestep_change(cfg: Config, mans: list[Maneuver], dt_s: float) -> float:
@@ -145,8 +164,15 @@ def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str,
     for man in mans:
         r = run_maneuver(cfg, man, cfg.physics.timestep_s)
         meas, mod = float(r["measured_j"].sum()), float(r["model_j"].sum())
-        man_rows.append({"name": man.name, "slots": len(man.speed_mps), "measured_energy_j": meas,
-                         "model_energy_j": mod, "rel_error": (meas - mod) / mod})
+        man_rows.append(
+            {
+                "name": man.name,
+                "slots": len(man.speed_mps),
+                "measured_energy_j": meas,
+                "model_energy_j": mod,
+                "rel_error": (meas - mod) / mod,
+            }
+        )
         traces.append((man.name, r))
     changes = {dt: timestep_change(cfg, mans, dt) for dt in TIMESTEP_CANDIDATES_S}
     ok = [dt for dt, c in changes.items() if c < CONVERGENCE_TOL]
@@ -154,9 +180,12 @@ def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str,
     result = {
         "steady": steady,
         "maneuvers": man_rows,
-        "timestep": {"dt_s": chosen, "rel_change_quarter_dt": changes[chosen],
-                     "candidates": {str(k): v for k, v in changes.items()},
-                     "configured_dt_s": cfg.physics.timestep_s},
+        "timestep": {
+            "dt_s": chosen,
+            "rel_change_quarter_dt": changes[chosen],
+            "candidates": {str(k): v for k, v in changes.items()},
+            "configured_dt_s": cfg.physics.timestep_s,
+        },
     }
     if figure is not None:
         _figure(result, traces, figure)
@@ -174,8 +203,9 @@ def _figure(result: dict[str, Any], traces: list, path: Path) -> None:
     v = [r["speed_mps"] for r in steady]
     axes[0].plot(v, [r["model_power_w"] for r in steady], "-", label="paper model (cubic)")
     axes[0].plot(v, [r["measured_power_w"] for r in steady], "o", label="MuJoCo, measured")
-    axes[0].set(xlabel="speed (m/s)", ylabel="electrical power (W)",
-                title="Steady state: power vs speed")
+    axes[0].set(
+        xlabel="speed (m/s)", ylabel="electrical power (W)", title="Steady state: power vs speed"
+    )
     axes[0].legend()
     axes[0].grid(alpha=0.3)
     ax = axes[1]
@@ -183,8 +213,11 @@ def _figure(result: dict[str, Any], traces: list, path: Path) -> None:
         slots = np.arange(1, len(r["measured_j"]) + 1)
         line = ax.plot(slots, r["measured_j"] / 1e3, "-", color=f"C{i}", label=f"{name}")
         ax.plot(slots, r["model_j"] / 1e3, "--", color=line[0].get_color())
-    ax.set(xlabel="slot", ylabel="energy per slot (kJ)",
-           title="Manoeuvres: measured (solid) vs model (dashed)")
+    ax.set(
+        xlabel="slot",
+        ylabel="energy per slot (kJ)",
+        title="Manoeuvres: measured (solid) vs model (dashed)",
+    )
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -194,18 +227,30 @@ def _figure(result: dict[str, Any], traces: list, path: Path) -> None:
 
 
 def format_table(result: dict[str, Any]) -> str:
-    lines = ["Steady state (electrical power, W)",
-             f"{'speed m/s':>10} {'measured':>10} {'model':>10} {'rel.err':>9}"]
+    lines = [
+        "Steady state (electrical power, W)",
+        f"{'speed m/s':>10} {'measured':>10} {'model':>10} {'rel.err':>9}",
+    ]
     for r in result["steady"]:
-        lines.append(f"{r['speed_mps']:>10.1f} {r['measured_power_w']:>10.2f} "
-                     f"{r['model_power_w']:>10.2f} {r['rel_error']:>+9.2%}")
-    lines += ["", "Manoeuvres (energy over the manoeuvre, kJ)",
-              f"{'manoeuvre':<28} {'slots':>5} {'measured':>9} {'model':>9} {'gap':>8}"]
+        lines.append(
+            f"{r['speed_mps']:>10.1f} {r['measured_power_w']:>10.2f} "
+            f"{r['model_power_w']:>10.2f} {r['rel_error']:>+9.2%}"
+        )
+    lines += [
+        "",
+        "Manoeuvres (energy over the manoeuvre, kJ)",
+        f"{'manoeuvre':<28} {'slots':>5} {'measured':>9} {'model':>9} {'gap':>8}",
+    ]
     for r in result["maneuvers"]:
-        lines.append(f"{r['name']:<28} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
-                     f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%}")
+        lines.append(
+            f"{r['name']:<28} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
+            f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%}"
+        )
     ts = result["timestep"]
     cands = ", ".join(f"dt={k} s: {v:.2%}" for k, v in ts["candidates"].items())
-    lines += ["", f"Timestep: largest dt with < 1% change when quartered: {ts['dt_s']} s "
-              f"({ts['rel_change_quarter_dt']:.3%}); {cands}"]
+    lines += [
+        "",
+        f"Timestep: largest dt with < 1% change when quartered: {ts['dt_s']} s "
+        f"({ts['rel_change_quarter_dt']:.3%}); {cands}",
+    ]
     return "\n".join(lines)

@@ -77,24 +77,51 @@ def _add_markers(spec: mujoco.MjSpec, cfg: Config) -> None:
     seabed.size = [ax / 2 + 20, ay / 2 + 20, 1]
     for k, (x, y) in enumerate(sc.nodes_m):
         body = world.add_body(name=names.node_name(k), pos=[x, y, SEABED_DEPTH_M])
-        body.add_geom(name=f"{names.node_name(k)}_marker", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                      size=[NODE_RADIUS_M, 2.0, 0], pos=[0, 0, 2.0], rgba=[0.2, 0.6, 1, 1],
-                      contype=0, conaffinity=0, fluid_ellipsoid=0)
+        body.add_geom(
+            name=f"{names.node_name(k)}_marker",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            size=[NODE_RADIUS_M, 2.0, 0],
+            pos=[0, 0, 2.0],
+            rgba=[0.2, 0.6, 1, 1],
+            contype=0,
+            conaffinity=0,
+            fluid_ellipsoid=0,
+        )
         body.add_site(name=f"{names.node_name(k)}_antenna", pos=[0, 0, 4.0], size=[0.5, 0, 0])
     dx, dy = sc.dock_center_m
-    world.add_geom(name=names.DOCK_GEOM, type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                   size=[sc.dock_radius_m, 0.2, 0], pos=[dx, dy, SEABED_DEPTH_M + 0.5],
-                   material="dock", contype=0, conaffinity=0)
-    edges = [((ax / 2, 0), (ax / 2, 1)), ((ax / 2, ay), (ax / 2, 1)),
-             ((0, ay / 2), (1, ay / 2)), ((ax, ay / 2), (1, ay / 2))]
+    world.add_geom(
+        name=names.DOCK_GEOM,
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        size=[sc.dock_radius_m, 0.2, 0],
+        pos=[dx, dy, SEABED_DEPTH_M + 0.5],
+        material="dock",
+        contype=0,
+        conaffinity=0,
+    )
+    edges = [
+        ((ax / 2, 0), (ax / 2, 1)),
+        ((ax / 2, ay), (ax / 2, 1)),
+        ((0, ay / 2), (1, ay / 2)),
+        ((ax, ay / 2), (1, ay / 2)),
+    ]
     for i, ((x, y), (hx, hy)) in enumerate(edges):
-        world.add_geom(name=f"boundary{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=[hx, hy, 0.5],
-                       pos=[x, y, SEABED_DEPTH_M + 0.5], material="boundary",
-                       contype=0, conaffinity=0)
+        world.add_geom(
+            name=f"boundary{i}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[hx, hy, 0.5],
+            pos=[x, y, SEABED_DEPTH_M + 0.5],
+            material="boundary",
+            contype=0,
+            conaffinity=0,
+        )
     # Top-down camera over the area's centre, high enough to see all of it at fovy = 45 deg.
     height = 0.5 * max(ax, ay) / np.tan(np.radians(22.5)) * 1.08
-    world.add_camera(name=names.TOP_CAMERA, pos=[ax / 2, ay / 2, SEABED_DEPTH_M + height],
-                     xyaxes=[1, 0, 0, 0, 1, 0], fovy=45)
+    world.add_camera(
+        name=names.TOP_CAMERA,
+        pos=[ax / 2, ay / 2, SEABED_DEPTH_M + height],
+        xyaxes=[1, 0, 0, 0, 1, 0],
+        fovy=45,
+    )
 
 
 def build_scene(cfg: Config) -> mujoco.MjSpec:
@@ -108,8 +135,10 @@ def build_scene(cfg: Config) -> mujoco.MjSpec:
         frame = spec.worldbody.add_frame(pos=[0.0, 0.0, AUV_DEPTH_M])
         spec.attach(auv_spec(cfg.motion), prefix=names.auv_prefix(i), frame=frame)
         # The area's edges are a fence: joint limits the vehicle stops against.
-        for joint, side in ((names.JOINT_X, cfg.scenario.area_m[0]),
-                            (names.JOINT_Y, cfg.scenario.area_m[1])):
+        for joint, side in (
+            (names.JOINT_X, cfg.scenario.area_m[0]),
+            (names.JOINT_Y, cfg.scenario.area_m[1]),
+        ):
             j = spec.joint(names.auv_prefix(i) + joint)
             j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
             j.range = [0.0, side]

@@ -9,22 +9,28 @@ from iout_mj.config import AcousticsConfig
 CFG = AcousticsConfig()
 
 
-@pytest.mark.parametrize(("f_khz", "expected"), [
-    # 0.11 f2/(1+f2) + 44 f2/(4100+f2) + 2.75e-4 f2 + 0.003, f2 = f^2
-    (50.0, 0.109956 + 16.666667 + 0.6875 + 0.003),   # 17.46712 dB/km
-    (70.0, 0.109978 + 23.955556 + 1.3475 + 0.003),   # 25.41603 dB/km
-    (1.0, 0.055 + 0.010729 + 0.000275 + 0.003),
-])
+@pytest.mark.parametrize(
+    ("f_khz", "expected"),
+    [
+        # 0.11 f2/(1+f2) + 44 f2/(4100+f2) + 2.75e-4 f2 + 0.003, f2 = f^2
+        (50.0, 0.109956 + 16.666667 + 0.6875 + 0.003),  # 17.46712 dB/km
+        (70.0, 0.109978 + 23.955556 + 1.3475 + 0.003),  # 25.41603 dB/km
+        (1.0, 0.055 + 0.010729 + 0.000275 + 0.003),
+    ],
+)
 def test_thorp(f_khz, expected):
     assert acoustics.thorp_absorption_db_per_km(f_khz) == pytest.approx(expected, abs=1e-5)
 
 
-@pytest.mark.parametrize(("d_m", "f_khz", "expected"), [
-    (10.0, 50.0, 15.0 + 0.174671),     # 1.5*10*log10(10) + 17.46712*0.01
-    (100.0, 70.0, 30.0 + 2.541603),    # 1.5*20 + 25.41603*0.1
-    (500.0, 50.0, 40.484550 + 8.733562),
-    (0.2, 50.0, 0.0 + 0.017467),       # closer than 1 m counts as 1 m for spreading
-])
+@pytest.mark.parametrize(
+    ("d_m", "f_khz", "expected"),
+    [
+        (10.0, 50.0, 15.0 + 0.174671),  # 1.5*10*log10(10) + 17.46712*0.01
+        (100.0, 70.0, 30.0 + 2.541603),  # 1.5*20 + 25.41603*0.1
+        (500.0, 50.0, 40.484550 + 8.733562),
+        (0.2, 50.0, 0.0 + 0.017467),  # closer than 1 m counts as 1 m for spreading
+    ],
+)
 def test_transmission_loss(d_m, f_khz, expected):
     got = acoustics.transmission_loss_db(d_m, f_khz, 1.5)
     assert got == pytest.approx(expected, abs=1e-5)
@@ -35,12 +41,15 @@ def test_source_level():
     assert acoustics.source_level_db(5.0, 0.7, 10.0) == pytest.approx(186.240680, abs=1e-5)
 
 
-@pytest.mark.parametrize(("d_m", "harvest_w"), [
-    # RL = 186.240680 - TL(d, 70 kHz) + 10; P = 0.7 * 4 * 10^((RL - 150)/10) / (4 * 125)
-    (100.0, 0.7 * 4 * 10 ** ((186.240680 - 32.541603 + 10 - 150) / 10) / 500),  # 0.131244 W
-    (10.0, 0.7 * 4 * 10 ** ((186.240680 - 15.254160 + 10 - 150) / 10) / 500),   # 7.0277 W
-    (500.0, 0.7 * 4 * 10 ** ((186.240680 - 53.192567 + 10 - 150) / 10) / 500),  # 1.1297 mW
-])
+@pytest.mark.parametrize(
+    ("d_m", "harvest_w"),
+    [
+        # RL = 186.240680 - TL(d, 70 kHz) + 10; P = 0.7 * 4 * 10^((RL - 150)/10) / (4 * 125)
+        (100.0, 0.7 * 4 * 10 ** ((186.240680 - 32.541603 + 10 - 150) / 10) / 500),  # 0.131244 W
+        (10.0, 0.7 * 4 * 10 ** ((186.240680 - 15.254160 + 10 - 150) / 10) / 500),  # 7.0277 W
+        (500.0, 0.7 * 4 * 10 ** ((186.240680 - 53.192567 + 10 - 150) / 10) / 500),  # 1.1297 mW
+    ],
+)
 def test_harvest(d_m, harvest_w):
     assert acoustics.harvest_power_w(d_m, CFG) == pytest.approx(harvest_w, rel=1e-5)
     assert acoustics.harvest_energy_j(d_m, CFG) == pytest.approx(25 * harvest_w, rel=1e-5)
@@ -50,8 +59,9 @@ def test_harvest_at_100m_is_about_3_3_joules_per_slot():
     assert acoustics.harvest_energy_j(100.0, CFG) == pytest.approx(3.281, abs=1e-3)
 
 
-@pytest.mark.parametrize(("d_m", "tl_db"), [(100.0, 31.746712), (10.0, 15.174671),
-                                             (500.0, 49.218112)])
+@pytest.mark.parametrize(
+    ("d_m", "tl_db"), [(100.0, 31.746712), (10.0, 15.174671), (500.0, 49.218112)]
+)
 def test_uplink(d_m, tl_db):
     # gamma = 10 log10(2^12 - 1) = 36.122539; NL_band = 40 + 30; SL_req = gamma + TL + 70
     sl_req = 36.122539 + tl_db + 70.0

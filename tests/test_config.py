@@ -35,7 +35,8 @@ def test_round_trip(tmp_path, suffix):
 
 def test_presets_and_random_layouts():
     assert make_config(1, 13).scenario.nodes_m == tuple(
-        (float(x), float(y)) for x, y in PAPER_LAYOUTS[13])
+        (float(x), float(y)) for x, y in PAPER_LAYOUTS[13]
+    )
     for k in (2, 9, 30):
         nodes = np.array(random_layout(k, seed=k))
         assert len(nodes) == k
@@ -47,21 +48,24 @@ def test_presets_and_random_layouts():
     assert random_layout(9, seed=1) != random_layout(9, seed=2)
 
 
-@pytest.mark.parametrize(("data", "match"), [
-    ({"motion": {"v_max": 4}}, r"unknown key.*v_max"),
-    ({"motion": {"v_max_mps": "fast"}}, r"v_max_mps.*wrong type.*number"),
-    ({"motion": {"heading_levels": 11.5}}, r"heading_levels.*wrong type.*integer"),
-    ({"acoustics": {"p_tx_w": -5}}, r"p_tx_w=-5.0 is invalid: accepted a finite number > 0"),
-    ({"acoustics": {"eta_tx": 1.5}}, r"eta_tx=1.5 is invalid: accepted a number in \(0, 1\]"),
-    ({"motion": {"prop_efficiency": 0}}, r"prop_efficiency"),
-    ({"scenario": {"nodes_m": [[100, 100]]}}, r"nodes_m.*2 to 30 nodes"),
-    ({"scenario": {"dock_center_m": [990, 500]}}, r"dock_center_m.*inside area_m"),
-    ({"scenario": {"n_auvs": 5}}, r"n_auvs=5.*1 to 4"),
-    ({"scenario": {"nodes_m": [[100, 100], [2000, 5]]}}, r"nodes_m\[1\].*inside area_m"),
-    ({"acoustics": {"noise_model": "loud"}}, r"noise_model.*'flat' or 'wenz'"),
-    ({"scenario": {"area_m": [1000]}}, r"area_m.*list of 2 values"),
-    ([1, 2], r"wrong type: accepted a mapping"),
-])
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        ({"motion": {"v_max": 4}}, r"unknown key.*v_max"),
+        ({"motion": {"v_max_mps": "fast"}}, r"v_max_mps.*wrong type.*number"),
+        ({"motion": {"heading_levels": 11.5}}, r"heading_levels.*wrong type.*integer"),
+        ({"acoustics": {"p_tx_w": -5}}, r"p_tx_w=-5.0 is invalid: accepted a finite number > 0"),
+        ({"acoustics": {"eta_tx": 1.5}}, r"eta_tx=1.5 is invalid: accepted a number in \(0, 1\]"),
+        ({"motion": {"prop_efficiency": 0}}, r"prop_efficiency"),
+        ({"scenario": {"nodes_m": [[100, 100]]}}, r"nodes_m.*2 to 30 nodes"),
+        ({"scenario": {"dock_center_m": [990, 500]}}, r"dock_center_m.*inside area_m"),
+        ({"scenario": {"n_auvs": 5}}, r"n_auvs=5.*1 to 4"),
+        ({"scenario": {"nodes_m": [[100, 100], [2000, 5]]}}, r"nodes_m\[1\].*inside area_m"),
+        ({"acoustics": {"noise_model": "loud"}}, r"noise_model.*'flat' or 'wenz'"),
+        ({"scenario": {"area_m": [1000]}}, r"area_m.*list of 2 values"),
+        ([1, 2], r"wrong type: accepted a mapping"),
+    ],
+)
 def test_bad_input_names_field_value_and_accepted(data, match):
     with pytest.raises(ConfigError, match=match):
         Config.from_dict(data)

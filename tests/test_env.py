@@ -16,8 +16,17 @@ from iout_mj.envs import ENV_ID, MultiAUVEnv
 from iout_mj.mission import REWARD_TERMS
 
 BACKENDS = ["kinematic", "mujoco"]
-METRIC_KEYS = {"mean_aoi", "objective", "jain", "delivered_bits", "propulsion_energy_j",
-               "min_separation_m", "docked", "mission_slots", "collisions"}
+METRIC_KEYS = {
+    "mean_aoi",
+    "objective",
+    "jain",
+    "delivered_bits",
+    "propulsion_energy_j",
+    "min_separation_m",
+    "docked",
+    "mission_slots",
+    "collisions",
+}
 
 
 def make(backend, **kw):
@@ -59,7 +68,7 @@ def test_spaces_and_finite_observations(backend):
         assert env.observation_space.contains(obs)
         assert np.isfinite(r)
         done = term or trunc
-    assert METRIC_KEYS <= set(info["metrics"])
+    assert set(info["metrics"]) >= METRIC_KEYS
     assert info["metrics"]["mission_slots"] <= 55
 
 
@@ -71,7 +80,7 @@ def test_same_seed_same_trajectory(backend):
     a, b = rollout(env, 7, actions), rollout(env, 7, actions)
     c = rollout(env, 8, actions)
     assert np.array_equal(a[0], b[0]) and not np.array_equal(a[0], c[0])
-    for x, y in zip(a[1:], b[1:]):
+    for x, y in zip(a[1:], b[1:], strict=False):
         assert np.array_equal(x[0], y[0]) and x[1:4] == y[1:4] and x[4] == y[4]
 
 
@@ -81,7 +90,7 @@ def test_pickle_round_trip(backend):
     clone = pickle.loads(pickle.dumps(env))
     actions = [np.array([6, 4, 1, 1])] * 5
     a, b = rollout(env, 2, actions), rollout(clone, 2, actions)
-    assert all(np.array_equal(x[0], y[0]) for x, y in zip(a[1:], b[1:]))
+    assert all(np.array_equal(x[0], y[0]) for x, y in zip(a[1:], b[1:], strict=False))
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -101,7 +110,9 @@ def test_bad_actions(backend):
     env.reset(seed=0)
     with pytest.raises(ValueError, match="shape"):
         env.step(np.zeros(7, dtype=int))
-    with pytest.raises(ValueError, match=r"AUV 1: aet_node index 7 is out of range; accepted 0 to 6"):
+    with pytest.raises(
+        ValueError, match=r"AUV 1: aet_node index 7 is out of range; accepted 0 to 6"
+    ):
         env.step(np.array([5, 3, 0, 0, 5, 3, 7, 0]))
     with pytest.raises(ValueError, match=r"AUV 0: heading index -1"):
         env.step(np.array([-1, 3, 0, 0, 5, 3, 0, 0]))
@@ -130,7 +141,7 @@ def test_network_and_energy_bookkeeping(backend):
     env.reset(seed=0)
     m = env.unwrapped.mission
     # straight on at 1 m/s from (50, 50): charge and collect from node 0 at (100, 100)
-    _, _, _, _, info = env.step(np.array([5, 3, 0, 0]))
+    _, _, _, _, _info = env.step(np.array([5, 3, 0, 0]))
     assert m.network.deliveries[0] == 1 and m.network.deliveries[1:].sum() == 0
     assert m.network.aoi[0] == 2.0 and m.network.aoi[1] == 2.0
     assert m.network.energy_j[0] > cfg.network.node_initial_energy_j  # AET outweighs uplink
@@ -143,8 +154,13 @@ def test_network_and_energy_bookkeeping(backend):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_boundary_attempt_is_penalised_and_kept_inside(backend):
-    cfg = scenario(make_config(1, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0,
-                   start_heading_rad=float(np.pi), starts_m=((40.0, 500.0),))
+    cfg = scenario(
+        make_config(1, 7),
+        start_jitter_m=0.0,
+        start_heading_jitter_deg=0.0,
+        start_heading_rad=float(np.pi),
+        starts_m=((40.0, 500.0),),
+    )
     env = make(backend, config=cfg)
     env.reset(seed=0)
     terms = []
@@ -158,11 +174,15 @@ def test_boundary_attempt_is_penalised_and_kept_inside(backend):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_docking_terminates_with_bonus(backend):
-    cfg = scenario(make_config(1, 7), starts_m=((745.0, 830.0),), start_jitter_m=0.0,
-                   start_heading_jitter_deg=0.0)
+    cfg = scenario(
+        make_config(1, 7),
+        starts_m=((745.0, 830.0),),
+        start_jitter_m=0.0,
+        start_heading_jitter_deg=0.0,
+    )
     env = make(backend, config=cfg)
     env.reset(seed=0)
-    _, r, term, trunc, info = env.step(np.array([5, 3, 0, 0]))
+    _, _r, term, trunc, info = env.step(np.array([5, 3, 0, 0]))
     assert term and not trunc
     assert info["reward_terms"]["docking"] == 70.0  # 60 first entry + 10 all docked
     assert info["metrics"]["docked"] == [True]
@@ -178,8 +198,12 @@ def test_truncation_at_horizon(backend):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_collision_penalty(backend):
-    cfg = scenario(make_config(2, 7), starts_m=((300.0, 300.0), (300.0, 330.0)),
-                   start_jitter_m=0.0, start_heading_jitter_deg=0.0)
+    cfg = scenario(
+        make_config(2, 7),
+        starts_m=((300.0, 300.0), (300.0, 330.0)),
+        start_jitter_m=0.0,
+        start_heading_jitter_deg=0.0,
+    )
     env = make(backend, config=cfg)
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.array([5, 3, 0, 0, 5, 3, 1, 1]))
@@ -199,7 +223,7 @@ def test_kinematic_and_physics_agree_on_gentle_manoeuvres():
     speeds = [4, 4, 3, 3, 3, 3, 3, 3, 3, 3]
     for env in envs.values():
         env.reset(seed=0)
-    for h, s in zip(pattern, speeds):
+    for h, s in zip(pattern, speeds, strict=False):
         a = np.array([h, s, 0, 0, h, s, 3, 3])
         for env in envs.values():
             env.step(a)
@@ -213,9 +237,9 @@ def test_kinematic_and_physics_agree_on_gentle_manoeuvres():
 
 def test_diverged_physics_ends_episode_with_error():
     env = make("mujoco")
-    obs0, _ = env.reset(seed=0)
+    _obs0, _ = env.reset(seed=0)
     env.unwrapped.physics.data.qvel[:] = 1e200
-    obs, r, term, trunc, info = env.step(np.array([5, 3, 0, 0, 5, 3, 0, 0]))
+    obs, _r, term, _trunc, info = env.step(np.array([5, 3, 0, 0, 5, 3, 0, 0]))
     assert term and "error" in info and "metrics" in info
     assert np.all(np.isfinite(obs))
 
@@ -233,11 +257,13 @@ def test_random_layout_per_episode():
 
 def test_one_env_stays_under_200_mb():
     # VmHWM (peak resident set) of the child alone; ru_maxrss would carry pytest's over exec.
-    code = ("import gymnasium as gym, numpy as np, iout_mj\n"
-            "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=4, n_nodes=13)\n"
-            "env.reset(seed=0)\n"
-            "for _ in range(55): env.step(env.action_space.sample())\n"
-            "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n")
+    code = (
+        "import gymnasium as gym, numpy as np, iout_mj\n"
+        "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=4, n_nodes=13)\n"
+        "env.reset(seed=0)\n"
+        "for _ in range(55): env.step(env.action_space.sample())\n"
+        "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     rss_mb = int(out.stdout.split()[-1]) / 1024
     assert rss_mb < 200, rss_mb

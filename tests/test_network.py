@@ -12,8 +12,11 @@ NEAR = np.array([[100.0, 150.0]])  # 50 m from node 0, far from node 1
 
 
 def make(k_reset=3, aoi_max=50.0, e0=0.1):
-    return SensorNetwork(NODES, NetworkConfig(k_reset=k_reset, aoi_max=aoi_max,
-                                              node_initial_energy_j=e0), AcousticsConfig())
+    return SensorNetwork(
+        NODES,
+        NetworkConfig(k_reset=k_reset, aoi_max=aoi_max, node_initial_energy_j=e0),
+        AcousticsConfig(),
+    )
 
 
 def step(net, data_node, wet_node=0, xy=NEAR, active=True):
@@ -91,11 +94,14 @@ def test_delivered_bits():
     assert net.delivered_bits == 12_000 * 25
 
 
-@pytest.mark.parametrize(("counts", "expected"), [
-    ([3, 3, 3, 3], 1.0),
-    ([4, 0, 0, 0], 0.25),          # 16 / (4 * 16)
-    ([1, 2, 3], 36 / (3 * 14)),    # 0.857142...
-    ([0, 0, 0], 0.0),              # nothing delivered: defined as 0
-])
+@pytest.mark.parametrize(
+    ("counts", "expected"),
+    [
+        ([3, 3, 3, 3], 1.0),
+        ([4, 0, 0, 0], 0.25),  # 16 / (4 * 16)
+        ([1, 2, 3], 36 / (3 * 14)),  # 0.857142...
+        ([0, 0, 0], 0.0),  # nothing delivered: defined as 0
+    ],
+)
 def test_jain(counts, expected):
     assert jain_index(counts) == pytest.approx(expected)

@@ -31,11 +31,17 @@ def test_scene_steps_without_warnings_and_names_everything(n_auvs):
     d.ctrl[:] = 1.0
     mujoco.mj_step(m, d, round(1.0 / m.opt.timestep))
     assert all(w.number == 0 for w in d.warning)
-    for objtype, count in [(mujoco.mjtObj.mjOBJ_BODY, m.nbody), (mujoco.mjtObj.mjOBJ_GEOM, m.ngeom),
-                           (mujoco.mjtObj.mjOBJ_JOINT, m.njnt), (mujoco.mjtObj.mjOBJ_SITE, m.nsite),
-                           (mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu), (mujoco.mjtObj.mjOBJ_SENSOR, m.nsensor),
-                           (mujoco.mjtObj.mjOBJ_CAMERA, m.ncam)]:
-        for i in range(1 if objtype == mujoco.mjtObj.mjOBJ_BODY else 0, count):  # 0 = world
+    obj = mujoco.mjtObj
+    for objtype, count in [
+        (obj.mjOBJ_BODY, m.nbody),
+        (obj.mjOBJ_GEOM, m.ngeom),
+        (obj.mjOBJ_JOINT, m.njnt),
+        (obj.mjOBJ_SITE, m.nsite),
+        (obj.mjOBJ_ACTUATOR, m.nu),
+        (obj.mjOBJ_SENSOR, m.nsensor),
+        (obj.mjOBJ_CAMERA, m.ncam),
+    ]:
+        for i in range(1 if objtype == obj.mjOBJ_BODY else 0, count):  # body 0 is the world
             assert mujoco.mj_id2name(m, objtype, i), f"unnamed {objtype} {i}"
     assert m.nu == 2 * n_auvs
 

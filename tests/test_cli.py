@@ -1,0 +1,89 @@
+"""The `iout-mj` command line, run as a user would."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from iout_mj import acoustics
+from iout_mj.config import AcousticsConfig
+
+
+def run(*args, check=True):
+    return subprocess.run(
+        [sys.executable, "-m", "iout_mj.cli", *args], capture_output=True, text=True, check=check
+    )
+
+
+def test_link_budget_json():
+    rows = json.loads(run("link-budget", "--distance", "10", "100", "500", "--json").stdout)
+    assert [r["distance_m"] for r in rows] == [10, 100, 500]
+    keys = {
+        "distance_m",
+        "harvest_power_w",
+        "harvest_energy_j",
+        "uplink_power_w",
+        "uplink_energy_j",
+    }
+    cfg = AcousticsConfig()
+    for r in rows:
+        assert set(r) == keys
+        assert r["harvest_energy_j"] == pytest.approx(
+            float(acoustics.harvest_energy_j(r["distance_m"], cfg))
+        )
+        assert r["uplink_energy_j"] == pytest.approx(r["uplink_power_w"] * 25)
+    assert rows[1]["harvest_energy_j"] == pytest.approx(3.281, abs=1e-3)
+
+
+@pytest.mark.parametrize("bad", ["-5", "0", "far"])
+def test_link_budget_rejects_bad_distances(bad):
+    out = run("link-budget", "--distance", bad, check=False)
+    assert out.returncode == 2
+    assert "distance" in out.stderr and "accepted" in out.stderr
+
+
+def test_link_budget_table_and_bad_config(tmp_path):
+    assert "harvest J" in run("link-budget").stdout
+    bad = tmp_path / "c.yaml"
+    bad.write_text("acoustics:\n  p_tx_w: -1\n")
+    out = run("link-budget", "--config", str(bad), check=False)
+    assert out.returncode == 2 and "p_tx_w=-1.0 is invalid" in out.stderr
+
+
+def test_validate_energy_json(tmp_path):
+    result = json.loads(run("validate-energy", "--json", "--out", str(tmp_path)).stdout)
+    assert len(result["steady"]) == 8
+    assert all(abs(r["rel_error"]) <= 0.02 for r in result["steady"])
+    assert {m["name"].split()[0] for m in result["maneuvers"]} >= {
+        "accelerate",
+        "90",
+        "zig-zag",
+        "slowdown",
+        "mission",
+    }
+    assert result["timestep"]["rel_change_quarter_dt"] < 0.01
+    assert (tmp_path / "energy_validation.png").stat().st_size > 10_000
+
+
+def test_mission_without_video(tmp_path):
+    out = run("mission", "--slots", "3", "--no-video", "--out", str(tmp_path))
+    summary = json.loads(out.stdout)
+    assert summary["metrics"]["mission_slots"] == 3
+    assert (tmp_path / "mission.json").exists()
+    assert (tmp_path / "mission_trajectory.png").stat().st_size > 10_000
+
+
+def test_unknown_policy_is_a_clear_error(tmp_path):
+    out = run(
+        "mission",
+        "--policy",
+        "genius",
+        "--slots",
+        "1",
+        "--no-video",
+        "--out",
+        str(tmp_path),
+        check=False,
+    )
+    assert out.returncode == 2 and "unknown policy 'genius'" in out.stderr
