@@ -20,7 +20,7 @@ IntArray = NDArray[np.int64]
 NODE_REACHED_M = 60.0
 """A node is 'being visited' within this distance."""
 CRUISE_MPS = 3.0
-DOCK_MARGIN_SLOTS = 3.0
+DOCK_MARGIN_SLOTS = 4.0
 
 
 class Policy(Protocol):
@@ -46,6 +46,11 @@ def steer(
     dv = speeds_mps - mission.speed_sp
     s = np.abs(mission.dv_mps[None, :] - dv[:, None]).argmin(axis=1)
     return h, s
+
+
+def approach_speed(distance_m: NDArray[np.float64], slot_s: float) -> NDArray[np.float64]:
+    """Cruise far away, slow down near the target so the turning circle fits (>= 0.8 m/s)."""
+    return np.clip(distance_m / (2.0 * slot_s), 0.8, CRUISE_MPS)
 
 
 def _slots_left(mission: Mission) -> float:
@@ -110,7 +115,8 @@ class RoundRobin:
         targets = nodes[self._next]
         dock = _must_dock(mission)
         targets = np.where(dock[:, None], mission.dock_m, targets)
-        h, s = steer(mission, targets, np.full(n, CRUISE_MPS))
+        dist = np.linalg.norm(targets - mission.positions_m, axis=1)
+        h, s = steer(mission, targets, approach_speed(dist, mission.cfg.scenario.slot_s))
         return _pack(h, s, self._next, self._next)
 
 
@@ -176,8 +182,8 @@ class Planner:
         dist_t = d[np.arange(n), safe_t]
         targets = np.where(go_dock[:, None], mission.dock_m, nodes[safe_t])
         near = ~go_dock & (dist_t < NODE_REACHED_M)
-        speed = np.where(near, 0.8, np.clip(dist_t / mission.cfg.scenario.slot_s, 0.8, CRUISE_MPS))
-        speed = np.where(go_dock, CRUISE_MPS, speed)
+        dist = np.where(go_dock, mission.dock_dist_m, dist_t)
+        speed = np.where(near, 0.8, approach_speed(dist, mission.cfg.scenario.slot_s))
         h, s = steer(mission, targets, speed)
         h = np.where(near, mission.cfg.motion.heading_levels - 1, h)  # circle at the node
         req = acoustics.uplink_energy_j(d, mission.cfg.acoustics)
