@@ -1,4 +1,4 @@
-"""`iout-mj` command line: link-budget, validate-energy, mission."""
+"""`iout-mj` command line: link-budget, validate-energy, mission, evaluate, figures."""
 
 from __future__ import annotations
 
@@ -108,6 +108,30 @@ def cmd_mission(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from iout_mj.evaluation import evaluate, format_table, save
+
+    rows, episodes = evaluate(args.policy, args.n_auvs, args.nodes, args.episodes, args.seed,
+                              args.backend, workers=args.workers)
+    if args.out:
+        save(rows, episodes, Path(args.out))
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        print(format_table(rows))
+        if args.out:
+            print(f"\nsaved: {Path(args.out) / 'results.csv'} and results.json")
+    return 0
+
+
+def cmd_figures(args: argparse.Namespace) -> int:
+    from iout_mj.figures import figures_from_results
+
+    for path in figures_from_results(Path(args.results), Path(args.out or args.results)):
+        print(path)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="iout-mj", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -144,6 +168,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=int, default=30)
     p.add_argument("--config", help="YAML/JSON config")
     p.set_defaults(func=cmd_mission)
+
+    p = sub.add_parser("evaluate", help="seeded episodes per (policy, N, K): mean and std")
+    p.add_argument("--policy", nargs="+", default=["greedy", "round-robin", "random-walk",
+                                                   "planner"],
+                   help="baseline names, shipped policies (ppo-n1-k7) or policy files")
+    p.add_argument("--n-auvs", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--nodes", type=int, nargs="+", default=[7])
+    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--seed", type=int, default=0, help="episode e uses seed S + e")
+    p.add_argument("--backend", choices=["mujoco", "kinematic"], default="mujoco")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: cores)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--out", help="folder for results.csv / results.json / traces.json")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("figures", help="the paper's figures from saved evaluation results")
+    p.add_argument("--results", required=True, help="folder written by evaluate --out")
+    p.add_argument("--out", help="folder for the PNGs (default: the results folder)")
+    p.set_defaults(func=cmd_figures)
     return parser
 
 

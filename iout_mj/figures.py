@@ -11,56 +11,52 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from iout_mj.mission import Mission
 
 AUV_COLORS = ["#e6a800", "#d62f9a", "#2ca02c", "#ff7f0e"]
 
 
-def trajectory_figure(mission: Mission, path: Path, title: str = "") -> None:
-    """AUV paths over the area, nodes (labelled with the data they delivered), dock zone."""
-    sc = mission.cfg.scenario
-    fig, ax = plt.subplots(figsize=(5.2, 5.2))
-    dock = plt.Circle(
-        sc.dock_center_m, sc.dock_radius_m, color="tab:green", alpha=0.25, label="dock zone"
-    )
+def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "",
+                      ax: Any = None) -> None:
+    """AUV paths over the area, nodes (labelled with the data they delivered), dock zone.
+
+    `trace` is `Mission.trace()`. With `ax` the figure is drawn there and not saved.
+    """
+    own = ax is None
+    if own:
+        fig, ax = plt.subplots(figsize=(5.2, 5.2))
+    dock = plt.Circle(trace["dock_center_m"], trace["dock_radius_m"], color="tab:green",
+                      alpha=0.25, label="dock zone")
     ax.add_patch(dock)
-    pos = np.array(mission.log.positions_m)  # (slots + 1, N, 2)
-    for i in range(mission.n_auvs):
-        ax.plot(
-            pos[:, i, 0], pos[:, i, 1], "-", color=AUV_COLORS[i % 4], lw=1.6, label=f"AUV {i + 1}"
-        )
-        ax.plot(pos[0, i, 0], pos[0, i, 1], "o", color=AUV_COLORS[i % 4], ms=5)
-        ax.plot(pos[-1, i, 0], pos[-1, i, 1], "s", color=AUV_COLORS[i % 4], ms=5)
-    nodes = mission.network.nodes_m
-    bits = mission.network.deliveries * mission.network.bits_per_delivery / 1e6
+    pos = np.array(trace["positions_m"])  # (slots + 1, N, 2)
+    for i in range(pos.shape[1]):
+        c = AUV_COLORS[i % 4]
+        ax.plot(pos[:, i, 0], pos[:, i, 1], "-", color=c, lw=1.6, label=f"AUV {i + 1}")
+        ax.plot(pos[0, i, 0], pos[0, i, 1], "o", color=c, ms=5)
+        ax.plot(pos[-1, i, 0], pos[-1, i, 1], "s", color=c, ms=5)
+    nodes = np.array(trace["nodes_m"])
+    bits = np.array(trace["delivered_bits_per_node"]) / 1e6
     ax.scatter(nodes[:, 0], nodes[:, 1], s=60, c="tab:blue", marker="^", zorder=3, label="nodes")
     for k, (x, y) in enumerate(nodes):
-        ax.annotate(
-            f"{bits[k]:.1f} Mbit", (x, y), textcoords="offset points", xytext=(5, 6), fontsize=7
-        )
-    ax.set(
-        xlim=(0, sc.area_m[0]),
-        ylim=(0, sc.area_m[1]),
-        xlabel="x (m)",
-        ylabel="y (m)",
-        title=title,
-        aspect="equal",
-    )
+        ax.annotate(f"{bits[k]:.1f} Mbit", (x, y), textcoords="offset points", xytext=(5, 6),
+                    fontsize=7)
+    ax.set(xlim=(0, trace["area_m"][0]), ylim=(0, trace["area_m"][1]), xlabel="x (m)",
+           ylabel="y (m)", title=title, aspect="equal")
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    if own:
+        fig.tight_layout()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=130)
+        plt.close(fig)
 
 
-def speed_heading_figure(missions: dict[str, Mission], path: Path) -> None:
-    """Speed and heading of AUV 1 over time for each named mission (paper Fig. 4)."""
+def speed_heading_figure(traces: dict[str, dict[str, Any]], path: Path) -> None:
+    """Heading and speed of AUV 1 over time for each named trace (paper Fig. 4)."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    for label, m in missions.items():
-        t = np.arange(len(m.log.speeds_mps)) * m.cfg.scenario.slot_s
-        axes[0].plot(t, np.degrees(np.unwrap(np.array(m.log.headings_rad)[:, 0])), label=label)
-        axes[1].plot(t, np.array(m.log.speeds_mps)[:, 0], label=label)
+    for label, tr in traces.items():
+        t = np.arange(len(tr["speeds_mps"])) * tr["slot_s"]
+        axes[0].plot(t, np.degrees(np.unwrap(np.array(tr["headings_rad"])[:, 0])), label=label)
+        axes[1].plot(t, np.array(tr["speeds_mps"])[:, 0], label=label)
     axes[0].set(xlabel="time (s)", ylabel="heading (deg, unwrapped)", title="Heading, AUV 1")
     axes[1].set(xlabel="time (s)", ylabel="speed (m/s)", title="Speed, AUV 1")
     for ax in axes:
@@ -69,6 +65,36 @@ def speed_heading_figure(missions: dict[str, Mission], path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def figures_from_results(results: Path, out: Path) -> list[Path]:
+    """All figures from a folder written by `iout-mj evaluate --out`."""
+    import json
+
+    path = results / "results.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist: run `iout-mj evaluate --out "
+                                f"{results}` first")
+    rows = json.loads(path.read_text())
+    paths = results_figures(rows, out)
+    traces_path = results / "traces.json"
+    traces = json.loads(traces_path.read_text()) if traces_path.is_file() else {}
+    if traces:
+        fig, axes = plt.subplots(1, len(traces), figsize=(4.6 * len(traces), 4.8))
+        for ax, (label, tr) in zip(np.atleast_1d(axes), sorted(traces.items()), strict=True):
+            trajectory_figure(tr, out, title=label, ax=ax)
+        fig.suptitle("Trajectories and data collected per node, K = 7 (paper Fig. 3)")
+        fig.tight_layout()
+        p = out / "fig3_trajectories_k7.png"
+        fig.savefig(p, dpi=130)
+        plt.close(fig)
+        paths.append(p)
+        single = {k: v for k, v in traces.items() if k.endswith("N=1")}
+        if single:
+            p = out / "fig4_speed_heading_n1.png"
+            speed_heading_figure(single, p)
+            paths.append(p)
+    return paths
 
 
 def results_figures(rows: list[dict[str, Any]], out: Path) -> list[Path]:

@@ -17,7 +17,8 @@ from iout_mj import energy
 from iout_mj.config import Config
 from iout_mj.mission import Mission
 
-_SEPARATION_SAMPLES = np.linspace(0.0, 1.0, 6)[:, None, None]
+_PATH_SAMPLES = np.linspace(0.0, 1.0, 6)[1:, None, None]
+"""Points along each straight slot move at which separations are checked."""
 
 
 class KinematicEnvironment(dm_env.Environment):
@@ -55,7 +56,7 @@ class KinematicEnvironment(dm_env.Environment):
             speed,
             prop,
             np.zeros(m.n_auvs),
-            self._min_separation(start, end),
+            start + _PATH_SAMPLES * (end - start),
         )
         obs = m.observation()
         if m.terminated:
@@ -65,13 +66,6 @@ class KinematicEnvironment(dm_env.Environment):
             self._reset_next = True
             return dm_env.truncation(m.reward, obs)
         return dm_env.transition(m.reward, obs)
-
-    def _min_separation(self, start: np.ndarray, end: np.ndarray) -> float:
-        if self.mission.n_auvs < 2:
-            return float("inf")
-        xy = start + _SEPARATION_SAMPLES * (end - start)  # (samples, N, 2)
-        iu, ju = np.triu_indices(self.mission.n_auvs, k=1)
-        return float(np.linalg.norm(xy[:, iu] - xy[:, ju], axis=2).min())
 
     def action_spec(self) -> specs.BoundedArray:
         high = self.mission.action_high

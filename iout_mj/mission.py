@@ -45,7 +45,7 @@ REWARD_TERMS = (
     "docking",
 )
 COLLISION_DISTANCE_M = 5.0
-"""Two hulls (3 m long) closer than this count as a collision."""
+"""Two hulls (3 m long) closer than this in a slot count as one collision (per pair and slot)."""
 OBS_LOW, OBS_HIGH = -1.0, 2.0
 """Bounds of every observation entry (node energy is clipped to the top)."""
 ENERGY_OBS_REF_J = 1e-3
@@ -192,7 +192,7 @@ class Mission:
         speeds_mps: FloatArray,
         propulsion_energy_j: FloatArray,
         yaw_energy_j: FloatArray,
-        min_separation_m: float,
+        path_m: FloatArray,
     ) -> float:
         """Book one slot after the vehicles moved; returns the reward.
 
@@ -200,7 +200,8 @@ class Mission:
             positions_m, headings_rad, speeds_mps: measured state at the end of the slot.
             propulsion_energy_j: (N,) electrical propulsion energy of the slot (no hotel load).
             yaw_energy_j: (N,) electrical yaw-actuation energy of the slot.
-            min_separation_m: smallest inter-AUV distance during the slot (inf for N = 1).
+            path_m: (S, N, 2) positions during the slot (MuJoCo: every substep), for the
+                separation metrics; pairs of docked AUVs (parked at the dock) are left out.
         """
         cfg, w = self.cfg, self.cfg.reward
         was_docked = self.docked
@@ -252,8 +253,13 @@ class Mission:
         self.slot += 1
         self.sum_mean_aoi += mean_aoi
         self.sum_objective += mean_aoi + w.fairness_lambda * (1.0 - jain)
-        self.min_separation_m = min(self.min_separation_m, min_separation_m)
-        self.collisions += int(min_separation_m < COLLISION_DISTANCE_M)
+        if self.n_auvs > 1:
+            iu, ju = self._pairs
+            gap = np.linalg.norm(path_m[:, iu] - path_m[:, ju], axis=2).min(axis=0)
+            gap = gap[~(was_docked[iu] & was_docked[ju])]
+            if gap.size:
+                self.min_separation_m = min(self.min_separation_m, float(gap.min()))
+                self.collisions += int(np.sum(gap < COLLISION_DISTANCE_M))
         self._log_slot()
         return self.reward
 
@@ -307,6 +313,21 @@ class Mission:
             "mission_slots": self.slot,
             "collisions": self.collisions,
             "deliveries_per_node": self.network.deliveries.tolist(),
+        }
+
+    def trace(self) -> dict[str, Any]:
+        """The episode's path and service, as plain lists (for figures and JSON)."""
+        sc, net = self.cfg.scenario, self.network
+        return {
+            "positions_m": np.array(self.log.positions_m).tolist(),
+            "headings_rad": np.array(self.log.headings_rad).tolist(),
+            "speeds_mps": np.array(self.log.speeds_mps).tolist(),
+            "nodes_m": net.nodes_m.tolist(),
+            "delivered_bits_per_node": (net.deliveries * net.bits_per_delivery).tolist(),
+            "dock_center_m": list(sc.dock_center_m),
+            "dock_radius_m": sc.dock_radius_m,
+            "area_m": list(sc.area_m),
+            "slot_s": sc.slot_s,
         }
 
     # ------------------------------------------------------------------ observation

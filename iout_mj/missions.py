@@ -138,9 +138,9 @@ def run_mission(
         mediapy.write_image(out / "mission.png", last[-1])
     from iout_mj.figures import trajectory_figure
 
-    mission = env.unwrapped.mission  # type: ignore[attr-defined]
+    trace = env.unwrapped.mission.trace()  # type: ignore[attr-defined]
     title = f"{policy}, N={n_auvs}, K={n_nodes}, {backend}"
-    trajectory_figure(mission, out / "mission_trajectory.png", title=title)
+    trajectory_figure(trace, out / "mission_trajectory.png", title=title)
     summary = {
         "policy": policy,
         "n_auvs": n_auvs,

@@ -57,7 +57,7 @@ class DataCollectionTask(base.Task):
             physics.speeds_mps(),
             mech[:, 0],
             mech[:, 1],
-            _min_separation_m(physics),
+            physics.substep_positions_m(),
         )
 
     def get_observation(self, physics: AUVPhysics) -> dict[str, np.ndarray]:
@@ -72,15 +72,6 @@ class DataCollectionTask(base.Task):
         if self.mission.truncated:
             return 1.0
         return None
-
-
-def _min_separation_m(physics: AUVPhysics) -> float:
-    """Smallest inter-AUV distance over every substep of the last slot."""
-    if physics.n_auvs < 2:
-        return float("inf")
-    xy = physics.substep_positions_m()
-    iu, ju = np.triu_indices(physics.n_auvs, k=1)
-    return float(np.linalg.norm(xy[:, iu] - xy[:, ju], axis=2).min())
 
 
 def make_environment(

@@ -1,0 +1,144 @@
+"""Seeded evaluation of policies over (N, K) grids, in parallel worker processes.
+
+Episode e of every (policy, N, K) uses seed S + e, so every policy starts from the same states.
+K = 7 and 13 use the paper's layouts; other K a seeded random layout fixed per K
+(`random_layout(K, seed=K)`), the same for every policy and episode.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import multiprocessing as mp
+import os
+from itertools import product
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from iout_mj.config import PAPER_LAYOUTS, Config, make_config
+
+SUMMARY_KEYS = ("mean_aoi", "objective", "jain", "delivered_bits", "propulsion_energy_j",
+                "docking_rate", "collisions")
+TRACE_NODES = 7
+
+
+def scenario_config(n_auvs: int, n_nodes: int, base: Config | None = None) -> Config:
+    """The evaluation scenario for (N, K)."""
+    layout = "paper" if n_nodes in PAPER_LAYOUTS else "random"
+    return make_config(n_auvs, n_nodes, layout, seed=n_nodes, base=base)
+
+
+def _episode(job: tuple[str, int, int, int, str, bool]) -> dict[str, Any]:
+    import gymnasium as gym
+
+    from iout_mj.envs import ENV_ID
+    from iout_mj.missions import load_policy, run_episode
+
+    policy_name, n_auvs, n_nodes, seed, backend, keep_trace = job
+    env = gym.make(ENV_ID, backend=backend, config=scenario_config(n_auvs, n_nodes))
+    policy = load_policy(policy_name, env, seed)
+    metrics = run_episode(env, policy, seed)
+    row: dict[str, Any] = {"policy": policy_name, "n_auvs": n_auvs, "n_nodes": n_nodes,
+                           "seed": seed, "backend": backend, **metrics}
+    if keep_trace:
+        row["trace"] = env.unwrapped.mission.trace()  # type: ignore[attr-defined]
+    env.close()
+    return row
+
+
+def _check_policies(policies: list[str], n_auvs: list[int], nodes: list[int],
+                    backend: str) -> None:
+    """Fail early (before any worker starts) on unknown or incompatible policies."""
+    import gymnasium as gym
+
+    from iout_mj.envs import ENV_ID
+    from iout_mj.missions import load_policy
+
+    for name, n, k in product(policies, n_auvs, nodes):
+        env = gym.make(ENV_ID, backend="kinematic", config=scenario_config(n, k))
+        load_policy(name, env)
+        env.close()
+
+
+def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Mean and standard deviation per (policy, N, K, backend)."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for e in episodes:
+        groups.setdefault((e["policy"], e["n_auvs"], e["n_nodes"], e["backend"]), []).append(e)
+    rows = []
+    for (policy, n, k, backend), eps in sorted(groups.items()):
+        values = {
+            "mean_aoi": [e["mean_aoi"] for e in eps],
+            "objective": [e["objective"] for e in eps],
+            "jain": [e["jain"] for e in eps],
+            "delivered_bits": [e["delivered_bits"] for e in eps],
+            "propulsion_energy_j": [float(np.mean(e["propulsion_energy_j"])) for e in eps],
+            "docking_rate": [float(all(e["docked"])) for e in eps],
+            "collisions": [e["collisions"] for e in eps],
+        }
+        row: dict[str, Any] = {"policy": policy, "n_auvs": n, "n_nodes": k, "backend": backend,
+                               "episodes": len(eps)}
+        for key in SUMMARY_KEYS:
+            row[key] = float(np.mean(values[key]))
+            row[key + "_std"] = float(np.std(values[key]))
+        rows.append(row)
+    return rows
+
+
+def evaluate(policies: list[str], n_auvs: list[int], nodes: list[int], episodes: int,
+             seed: int, backend: str, workers: int | None = None,
+             progress: bool = True) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Run every (policy, N, K, episode); returns (summary rows, episode rows)."""
+    if episodes < 1:
+        raise ValueError(f"episodes={episodes}: accepted an integer >= 1")
+    _check_policies(policies, n_auvs, nodes, backend)
+    jobs = [(p, n, k, seed + e, backend, e == 0 and k == TRACE_NODES)
+            for p, n, k, e in product(policies, n_auvs, nodes, range(episodes))]
+    workers = workers or min(len(jobs), os.cpu_count() or 1)
+    bar = tqdm(total=len(jobs), desc="episodes", unit="ep", disable=not progress)
+    results = []
+    if workers > 1:
+        with mp.get_context("spawn").Pool(workers) as pool:
+            for row in pool.imap_unordered(_episode, jobs):
+                results.append(row)
+                bar.update(1)
+    else:
+        for job in jobs:
+            results.append(_episode(job))
+            bar.update(1)
+    bar.close()
+    results.sort(key=lambda r: (r["policy"], r["n_auvs"], r["n_nodes"], r["seed"]))
+    return summarize(results), results
+
+
+def save(rows: list[dict[str, Any]], episodes: list[dict[str, Any]], out: Path) -> None:
+    """results.json, results.csv, episodes.json and traces.json (one K = 7 episode each)."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps(rows, indent=2) + "\n")
+    with (out / "results.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    traces = {f"{e['policy']}, N={e['n_auvs']}": e.pop("trace") for e in episodes
+              if "trace" in e}
+    (out / "episodes.json").write_text(json.dumps(episodes) + "\n")
+    (out / "traces.json").write_text(json.dumps(traces) + "\n")
+
+
+def format_table(rows: list[dict[str, Any]]) -> str:
+    head = (f"{'policy':<14}{'N':>2}{'K':>4} {'mean AoI':>13} {'objective':>13} {'Jain':>11} "
+            f"{'data Mbit':>13} {'energy kJ/AUV':>15} {'docked':>7} {'coll.':>6}")
+    lines = [head]
+    for r in rows:
+        lines.append(
+            f"{r['policy']:<14}{r['n_auvs']:>2}{r['n_nodes']:>4} "
+            f"{r['mean_aoi']:>6.2f} ± {r['mean_aoi_std']:<4.2f} "
+            f"{r['objective']:>6.2f} ± {r['objective_std']:<4.2f} "
+            f"{r['jain']:>4.2f} ± {r['jain_std']:<4.2f} "
+            f"{r['delivered_bits'] / 1e6:>6.1f} ± {r['delivered_bits_std'] / 1e6:<4.1f} "
+            f"{r['propulsion_energy_j'] / 1e3:>7.0f} ± {r['propulsion_energy_j_std'] / 1e3:<5.0f}"
+            f"{r['docking_rate']:>7.0%} {r['collisions']:>6.2f}")
+    return "\n".join(lines)

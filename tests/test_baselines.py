@@ -1,0 +1,94 @@
+"""Baselines and the evaluation harness."""
+
+import json
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from iout_mj.baselines import POLICIES, make_policy
+from iout_mj.envs import ENV_ID
+from iout_mj.evaluation import SUMMARY_KEYS, evaluate, scenario_config
+from iout_mj.missions import run_episode, load_policy
+
+
+@pytest.mark.parametrize("name", sorted(POLICIES))
+@pytest.mark.parametrize(("n", "k"), [(1, 3), (2, 7), (3, 13), (4, 30)])
+def test_only_valid_actions(name, n, k):
+    env = gym.make(ENV_ID, backend="kinematic", config=scenario_config(n, k))
+    policy = make_policy(name, seed=1)
+    env.reset(seed=1)
+    done = False
+    while not done:
+        a = policy(env.unwrapped.mission)
+        assert env.action_space.contains(a)
+        _, _, term, trunc, _ = env.step(a)
+        done = term or trunc
+
+
+@pytest.mark.parametrize("backend", ["kinematic", "mujoco"])
+@pytest.mark.parametrize("name", ["greedy", "planner"])
+@pytest.mark.parametrize(("n", "k"), [(1, 7), (2, 7), (2, 13)])
+def test_greedy_and_planner_dock_in_time(backend, name, n, k):
+    env = gym.make(ENV_ID, backend=backend, config=scenario_config(n, k))
+    for seed in range(2):
+        metrics = run_episode(env, load_policy(name, env, seed), seed)
+        assert all(metrics["docked"]), (seed, metrics)
+        assert metrics["mission_slots"] <= 55
+
+
+def test_planner_beats_random_walk_on_aoi():
+    rows, _ = evaluate(["planner", "random-walk"], [1, 2], [7], episodes=3, seed=0,
+                       backend="kinematic", workers=1, progress=False)
+    aoi = {(r["policy"], r["n_auvs"]): r["mean_aoi"] for r in rows}
+    for n in (1, 2):
+        assert aoi[("planner", n)] < 0.8 * aoi[("random-walk", n)]
+
+
+def test_evaluate_json_has_every_key_and_figures(tmp_path):
+    out = subprocess.run(
+        [sys.executable, "-m", "iout_mj.cli", "evaluate", "--policy", "greedy", "planner",
+         "--n-auvs", "1", "2", "--nodes", "5", "7", "--episodes", "2", "--backend",
+         "kinematic", "--json", "--out", str(tmp_path)], capture_output=True, text=True,
+        check=True)
+    rows = json.loads(out.stdout)
+    assert len(rows) == 2 * 2 * 2
+    keys = {"policy", "n_auvs", "n_nodes", "backend", "episodes"}
+    keys |= set(SUMMARY_KEYS) | {k + "_std" for k in SUMMARY_KEYS}
+    for r in rows:
+        assert keys <= set(r)
+        assert r["episodes"] == 2
+    assert (tmp_path / "results.csv").read_text().startswith("policy,n_auvs,n_nodes")
+    out = subprocess.run([sys.executable, "-m", "iout_mj.cli", "figures", "--results",
+                          str(tmp_path)], capture_output=True, text=True, check=True)
+    pngs = out.stdout.split()
+    assert len(pngs) == 5
+    for p in pngs:
+        with open(p, "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+        assert len(open(p, "rb").read()) > 10_000
+
+
+def test_same_seed_same_start_for_every_policy():
+    starts = []
+    for name in ("greedy", "planner"):
+        env = gym.make(ENV_ID, backend="kinematic", n_auvs=2)
+        env.reset(seed=5)
+        starts.append(env.unwrapped.mission.positions_m.copy())
+        make_policy(name)
+    assert np.array_equal(*starts)
+
+
+def test_bad_policy_names_and_files(tmp_path):
+    env = gym.make(ENV_ID, backend="kinematic")
+    with pytest.raises(ValueError, match="unknown policy 'best'"):
+        load_policy("best", env)
+    bad = tmp_path / "policy.zip"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="cannot load policy"):
+        load_policy(str(bad), env)
+    out = subprocess.run([sys.executable, "-m", "iout_mj.cli", "evaluate", "--policy", "nope",
+                          "--episodes", "1"], capture_output=True, text=True)
+    assert out.returncode == 2 and "unknown policy 'nope'" in out.stderr
