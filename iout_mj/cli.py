@@ -132,6 +132,17 @@ def cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    from iout_mj.training import TrainConfig, train
+
+    cfg = TrainConfig.load(args.config)
+    out = Path(args.out or f"runs/{cfg.name}")
+    state = train(cfg, out, resume=args.resume)
+    print(json.dumps({"out": str(out), "num_timesteps": state.num_timesteps,
+                      "last_eval": state.history[-1] if state.history else None}, indent=2))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="iout-mj", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -183,6 +194,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="folder for results.csv / results.json / traces.json")
     p.set_defaults(func=cmd_evaluate)
 
+    p = sub.add_parser("train", help="PPO on a scenario (YAML config); checkpoints, resume")
+    p.add_argument("--config", required=True, help="training/configs/<name>.yaml")
+    p.add_argument("--out", help="run folder (default runs/<name>)")
+    p.add_argument("--resume", action="store_true", help="continue from <out>/last")
+    p.set_defaults(func=cmd_train)
+
     p = sub.add_parser("figures", help="the paper's figures from saved evaluation results")
     p.add_argument("--results", required=True, help="folder written by evaluate --out")
     p.add_argument("--out", help="folder for the PNGs (default: the results folder)")
@@ -197,7 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except (ConfigError, ValueError, FileNotFoundError) as exc:
+    except (ConfigError, ValueError, FileNotFoundError, FileExistsError) as exc:
         print(f"iout-mj {args.command}: error: {exc}", file=sys.stderr)
         return 2
 
