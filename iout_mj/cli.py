@@ -111,8 +111,15 @@ def cmd_mission(args: argparse.Namespace) -> int:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from iout_mj.evaluation import evaluate, format_table, save
 
-    rows, episodes = evaluate(args.policy, args.n_auvs, args.nodes, args.episodes, args.seed,
-                              args.backend, workers=args.workers)
+    rows, episodes = evaluate(
+        args.policy,
+        args.n_auvs,
+        args.nodes,
+        args.episodes,
+        args.seed,
+        args.backend,
+        workers=args.workers,
+    )
     if args.out:
         save(rows, episodes, Path(args.out))
     if args.json:
@@ -138,8 +145,16 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = TrainConfig.load(args.config)
     out = Path(args.out or f"runs/{cfg.name}")
     state = train(cfg, out, resume=args.resume)
-    print(json.dumps({"out": str(out), "num_timesteps": state.num_timesteps,
-                      "last_eval": state.history[-1] if state.history else None}, indent=2))
+    print(
+        json.dumps(
+            {
+                "out": str(out),
+                "num_timesteps": state.num_timesteps,
+                "last_eval": state.history[-1] if state.history else None,
+            },
+            indent=2,
+        )
+    )
     return 0
 
 
@@ -181,9 +196,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_mission)
 
     p = sub.add_parser("evaluate", help="seeded episodes per (policy, N, K): mean and std")
-    p.add_argument("--policy", nargs="+", default=["greedy", "round-robin", "random-walk",
-                                                   "planner"],
-                   help="baseline names, shipped policies (ppo-n1-k7) or policy files")
+    p.add_argument(
+        "--policy",
+        nargs="+",
+        default=["greedy", "round-robin", "random-walk", "planner"],
+        help="baseline names, shipped policies (ppo-n1-k7) or policy files",
+    )
     p.add_argument("--n-auvs", type=int, nargs="+", default=[1, 2])
     p.add_argument("--nodes", type=int, nargs="+", default=[7])
     p.add_argument("--episodes", type=int, default=20)

@@ -20,8 +20,15 @@ from tqdm import tqdm
 
 from iout_mj.config import PAPER_LAYOUTS, Config, make_config
 
-SUMMARY_KEYS = ("mean_aoi", "objective", "jain", "delivered_bits", "propulsion_energy_j",
-                "docking_rate", "collisions")
+SUMMARY_KEYS = (
+    "mean_aoi",
+    "objective",
+    "jain",
+    "delivered_bits",
+    "propulsion_energy_j",
+    "docking_rate",
+    "collisions",
+)
 TRACE_NODES = 7
 
 
@@ -41,16 +48,21 @@ def _episode(job: tuple[str, int, int, int, str, bool]) -> dict[str, Any]:
     env = gym.make(ENV_ID, backend=backend, config=scenario_config(n_auvs, n_nodes))
     policy = load_policy(policy_name, env, seed)
     metrics = run_episode(env, policy, seed)
-    row: dict[str, Any] = {"policy": policy_name, "n_auvs": n_auvs, "n_nodes": n_nodes,
-                           "seed": seed, "backend": backend, **metrics}
+    row: dict[str, Any] = {
+        "policy": policy_name,
+        "n_auvs": n_auvs,
+        "n_nodes": n_nodes,
+        "seed": seed,
+        "backend": backend,
+        **metrics,
+    }
     if keep_trace:
         row["trace"] = env.unwrapped.mission.trace()  # type: ignore[attr-defined]
     env.close()
     return row
 
 
-def _check_policies(policies: list[str], n_auvs: list[int], nodes: list[int],
-                    backend: str) -> None:
+def _check_policies(policies: list[str], n_auvs: list[int], nodes: list[int], backend: str) -> None:
     """Fail early (before any worker starts) on unknown or incompatible policies."""
     import gymnasium as gym
 
@@ -79,8 +91,13 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "docking_rate": [float(all(e["docked"])) for e in eps],
             "collisions": [e["collisions"] for e in eps],
         }
-        row: dict[str, Any] = {"policy": policy, "n_auvs": n, "n_nodes": k, "backend": backend,
-                               "episodes": len(eps)}
+        row: dict[str, Any] = {
+            "policy": policy,
+            "n_auvs": n,
+            "n_nodes": k,
+            "backend": backend,
+            "episodes": len(eps),
+        }
         for key in SUMMARY_KEYS:
             row[key] = float(np.mean(values[key]))
             row[key + "_std"] = float(np.std(values[key]))
@@ -88,15 +105,24 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
-def evaluate(policies: list[str], n_auvs: list[int], nodes: list[int], episodes: int,
-             seed: int, backend: str, workers: int | None = None,
-             progress: bool = True) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+def evaluate(
+    policies: list[str],
+    n_auvs: list[int],
+    nodes: list[int],
+    episodes: int,
+    seed: int,
+    backend: str,
+    workers: int | None = None,
+    progress: bool = True,
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run every (policy, N, K, episode); returns (summary rows, episode rows)."""
     if episodes < 1:
         raise ValueError(f"episodes={episodes}: accepted an integer >= 1")
     _check_policies(policies, n_auvs, nodes, backend)
-    jobs = [(p, n, k, seed + e, backend, e == 0 and k == TRACE_NODES)
-            for p, n, k, e in product(policies, n_auvs, nodes, range(episodes))]
+    jobs = [
+        (p, n, k, seed + e, backend, e == 0 and k == TRACE_NODES)
+        for p, n, k, e in product(policies, n_auvs, nodes, range(episodes))
+    ]
     workers = workers or min(len(jobs), os.cpu_count() or 1)
     bar = tqdm(total=len(jobs), desc="episodes", unit="ep", disable=not progress)
     results = []
@@ -122,15 +148,16 @@ def save(rows: list[dict[str, Any]], episodes: list[dict[str, Any]], out: Path) 
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    traces = {f"{e['policy']}, N={e['n_auvs']}": e.pop("trace") for e in episodes
-              if "trace" in e}
+    traces = {f"{e['policy']}, N={e['n_auvs']}": e.pop("trace") for e in episodes if "trace" in e}
     (out / "episodes.json").write_text(json.dumps(episodes) + "\n")
     (out / "traces.json").write_text(json.dumps(traces) + "\n")
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
-    head = (f"{'policy':<14}{'N':>2}{'K':>4} {'mean AoI':>13} {'objective':>13} {'Jain':>11} "
-            f"{'data Mbit':>13} {'energy kJ/AUV':>15} {'docked':>7} {'coll.':>6}")
+    head = (
+        f"{'policy':<14}{'N':>2}{'K':>4} {'mean AoI':>13} {'objective':>13} {'Jain':>11} "
+        f"{'data Mbit':>13} {'energy kJ/AUV':>15} {'docked':>7} {'coll.':>6}"
+    )
     lines = [head]
     for r in rows:
         lines.append(
@@ -140,5 +167,6 @@ def format_table(rows: list[dict[str, Any]]) -> str:
             f"{r['jain']:>4.2f} ± {r['jain_std']:<4.2f} "
             f"{r['delivered_bits'] / 1e6:>6.1f} ± {r['delivered_bits_std'] / 1e6:<4.1f} "
             f"{r['propulsion_energy_j'] / 1e3:>7.0f} ± {r['propulsion_energy_j_std'] / 1e3:<5.0f}"
-            f"{r['docking_rate']:>7.0%} {r['collisions']:>6.2f}")
+            f"{r['docking_rate']:>7.0%} {r['collisions']:>6.2f}"
+        )
     return "\n".join(lines)

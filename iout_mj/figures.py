@@ -11,12 +11,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-
 AUV_COLORS = ["#e6a800", "#d62f9a", "#2ca02c", "#ff7f0e"]
 
 
-def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "",
-                      ax: Any = None) -> None:
+def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: Any = None) -> None:
     """AUV paths over the area, nodes (labelled with the data they delivered), dock zone.
 
     `trace` is `Mission.trace()`. With `ax` the figure is drawn there and not saved.
@@ -24,8 +22,13 @@ def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "",
     own = ax is None
     if own:
         fig, ax = plt.subplots(figsize=(5.2, 5.2))
-    dock = plt.Circle(trace["dock_center_m"], trace["dock_radius_m"], color="tab:green",
-                      alpha=0.25, label="dock zone")
+    dock = plt.Circle(
+        trace["dock_center_m"],
+        trace["dock_radius_m"],
+        color="tab:green",
+        alpha=0.25,
+        label="dock zone",
+    )
     ax.add_patch(dock)
     pos = np.array(trace["positions_m"])  # (slots + 1, N, 2)
     for i in range(pos.shape[1]):
@@ -37,10 +40,17 @@ def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "",
     bits = np.array(trace["delivered_bits_per_node"]) / 1e6
     ax.scatter(nodes[:, 0], nodes[:, 1], s=60, c="tab:blue", marker="^", zorder=3, label="nodes")
     for k, (x, y) in enumerate(nodes):
-        ax.annotate(f"{bits[k]:.1f} Mbit", (x, y), textcoords="offset points", xytext=(5, 6),
-                    fontsize=7)
-    ax.set(xlim=(0, trace["area_m"][0]), ylim=(0, trace["area_m"][1]), xlabel="x (m)",
-           ylabel="y (m)", title=title, aspect="equal")
+        ax.annotate(
+            f"{bits[k]:.1f} Mbit", (x, y), textcoords="offset points", xytext=(5, 6), fontsize=7
+        )
+    ax.set(
+        xlim=(0, trace["area_m"][0]),
+        ylim=(0, trace["area_m"][1]),
+        xlabel="x (m)",
+        ylabel="y (m)",
+        title=title,
+        aspect="equal",
+    )
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
     if own:
@@ -73,8 +83,9 @@ def figures_from_results(results: Path, out: Path) -> list[Path]:
 
     path = results / "results.json"
     if not path.is_file():
-        raise FileNotFoundError(f"{path} does not exist: run `iout-mj evaluate --out "
-                                f"{results}` first")
+        raise FileNotFoundError(
+            f"{path} does not exist: run `iout-mj evaluate --out {results}` first"
+        )
     rows = json.loads(path.read_text())
     paths = results_figures(rows, out)
     traces_path = results / "traces.json"

@@ -68,8 +68,10 @@ class TrainConfig:
         if self.n_envs < 1 or self.n_steps < 1 or self.batch_size < 1:
             raise ConfigError("n_envs, n_steps and batch_size: accepted integers >= 1")
         if (self.n_envs * self.n_steps) % self.batch_size:
-            raise ConfigError(f"batch_size={self.batch_size} must divide n_envs*n_steps="
-                              f"{self.n_envs * self.n_steps}")
+            raise ConfigError(
+                f"batch_size={self.batch_size} must divide n_envs*n_steps="
+                f"{self.n_envs * self.n_steps}"
+            )
         if not self.phases:
             raise ConfigError("phases: accepted a non-empty list of {backend, timesteps}")
 
@@ -102,8 +104,13 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
 
     import iout_mj  # noqa: F401  (registers the env in the worker)
 
-    env = gym.make("iout_mj/MultiAUV-v0", n_auvs=cfg.n_auvs, n_nodes=cfg.n_nodes,
-                   backend=backend, layout=cfg.layout)
+    env = gym.make(
+        "iout_mj/MultiAUV-v0",
+        n_auvs=cfg.n_auvs,
+        n_nodes=cfg.n_nodes,
+        backend=backend,
+        layout=cfg.layout,
+    )
     env.reset(seed=seed)
     return Monitor(env)
 
@@ -113,7 +120,7 @@ def _vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, subproc: bo
 
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    fns = [partial(make_env, cfg, backend, seed + i) for i in range(n_envs)]
+    fns: list[Any] = [partial(make_env, cfg, backend, seed + i) for i in range(n_envs)]
     if subproc and n_envs > 1:
         return SubprocVecEnv(fns, start_method="spawn")
     return DummyVecEnv(fns)
@@ -127,8 +134,9 @@ class RunState:
     history: list[dict[str, Any]] = field(default_factory=list)
 
 
-def _save_checkpoint(model: Any, venv: Any, folder: Path, cfg: TrainConfig,
-                     extra: dict[str, Any]) -> None:
+def _save_checkpoint(
+    model: Any, venv: Any, folder: Path, cfg: TrainConfig, extra: dict[str, Any]
+) -> None:
     tmp = folder.with_name(folder.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
@@ -149,13 +157,24 @@ def _lr_schedule(cfg: TrainConfig) -> Any:
     return schedule
 
 
-def evaluate_policy_metrics(model: Any, venv_stats: Any, cfg: TrainConfig, backend: str,
-                            episodes: int, seed: int = HELD_OUT_SEED) -> dict[str, float]:
+def evaluate_policy_metrics(
+    model: Any,
+    venv_stats: Any,
+    cfg: TrainConfig,
+    backend: str,
+    episodes: int,
+    seed: int = HELD_OUT_SEED,
+) -> dict[str, float]:
     """Deterministic episodes on held-out seeds; mean metrics and return."""
     import gymnasium as gym
 
-    env = gym.make("iout_mj/MultiAUV-v0", n_auvs=cfg.n_auvs, n_nodes=cfg.n_nodes,
-                   backend=backend, layout=cfg.layout)
+    env = gym.make(
+        "iout_mj/MultiAUV-v0",
+        n_auvs=cfg.n_auvs,
+        n_nodes=cfg.n_nodes,
+        backend=backend,
+        layout=cfg.layout,
+    )
     rows = []
     for e in range(episodes):
         obs, _ = env.reset(seed=seed + e)
@@ -163,13 +182,19 @@ def evaluate_policy_metrics(model: Any, venv_stats: Any, cfg: TrainConfig, backe
         while True:
             action, _ = model.predict(venv_stats.normalize_obs(obs), deterministic=True)
             obs, r, term, trunc, info = env.step(action)
-            ret += r
+            ret += float(r)
             if term or trunc:
                 m = info["metrics"]
-                rows.append({"return": ret, "mean_aoi": m["mean_aoi"], "jain": m["jain"],
-                             "delivered_mbit": m["delivered_bits"] / 1e6,
-                             "docked": float(all(m["docked"])),
-                             "energy_kj": float(np.mean(m["propulsion_energy_j"])) / 1e3})
+                rows.append(
+                    {
+                        "return": ret,
+                        "mean_aoi": m["mean_aoi"],
+                        "jain": m["jain"],
+                        "delivered_mbit": m["delivered_bits"] / 1e6,
+                        "docked": float(all(m["docked"])),
+                        "energy_kj": float(np.mean(m["propulsion_energy_j"])) / 1e3,
+                    }
+                )
                 break
     env.close()
     return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
@@ -180,8 +205,9 @@ def _score(metrics: dict[str, float]) -> float:
     return -metrics["mean_aoi"] - 100.0 * max(0.0, 0.95 - metrics["docked"])
 
 
-def train(cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = True,
-          subproc: bool = True) -> RunState:
+def train(
+    cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = True, subproc: bool = True
+) -> RunState:
     """Train PPO through every phase; checkpoints in `out`."""
     import torch
     from stable_baselines3 import PPO
@@ -205,8 +231,13 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = Tr
         (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
         state = RunState()
 
-    bar = tqdm(total=cfg.total_timesteps, initial=state.num_timesteps, unit="step",
-               desc=cfg.name, disable=not progress)
+    bar = tqdm(
+        total=cfg.total_timesteps,
+        initial=state.num_timesteps,
+        unit="step",
+        desc=cfg.name,
+        disable=not progress,
+    )
     phase_start = sum(p.timesteps for p in cfg.phases[: state.phase])
 
     class Monitor(BaseCallback):
@@ -228,8 +259,9 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = Tr
                     self.logger.record_mean("episode/mean_aoi", m["mean_aoi"])
                     self.logger.record_mean("episode/jain", m["jain"])
                     self.logger.record_mean("episode/delivered_mbit", m["delivered_bits"] / 1e6)
-                    self.logger.record_mean("episode/energy_kj",
-                                            float(np.mean(m["propulsion_energy_j"])) / 1e3)
+                    self.logger.record_mean(
+                        "episode/energy_kj", float(np.mean(m["propulsion_energy_j"])) / 1e3
+                    )
                     self.logger.record_mean("episode/docking_rate", float(all(m["docked"])))
             bar.update(self.model.num_timesteps - bar.n)
             if self.model.num_timesteps - self.last_eval >= cfg.eval_every_steps:
@@ -247,8 +279,12 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = Tr
             for k, v in metrics.items():
                 model.logger.record(f"eval/{k}", v)
         state.num_timesteps = model.num_timesteps
-        entry = {"num_timesteps": model.num_timesteps, "phase": state.phase,
-                 "backend": backend, **metrics}
+        entry = {
+            "num_timesteps": model.num_timesteps,
+            "phase": state.phase,
+            "backend": backend,
+            **metrics,
+        }
         state.history.append(entry)
         score = _score(metrics)
         if score > state.best_score:
@@ -266,19 +302,37 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = Tr
         venv = _vec_env(cfg, backend, cfg.n_envs, cfg.seed * 1000 + index * 100, subproc)
         if model is None and (resume or index > 0) and (out / "last").exists():
             venv = VecNormalize.load(str(out / "last" / "vecnormalize.pkl"), venv)
-            model = PPO.load(out / "last" / "model.zip", env=venv, device="cpu",
-                             custom_objects={"learning_rate": _lr_schedule(cfg),
-                                             "lr_schedule": _lr_schedule(cfg)})
+            model = PPO.load(
+                out / "last" / "model.zip",
+                env=venv,
+                device="cpu",
+                custom_objects={
+                    "learning_rate": _lr_schedule(cfg),
+                    "lr_schedule": _lr_schedule(cfg),
+                },
+            )
         elif model is None:
             venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
-            model = PPO("MlpPolicy", venv, learning_rate=_lr_schedule(cfg), n_steps=cfg.n_steps,
-                        batch_size=cfg.batch_size, n_epochs=cfg.n_epochs, gamma=cfg.gamma,
-                        gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-                        ent_coef=cfg.ent_coef, seed=cfg.seed, device="cpu", verbose=0,
-                        policy_kwargs={"net_arch": list(cfg.net_arch)},
-                        tensorboard_log=str(out / "tb"))
+            model = PPO(
+                "MlpPolicy",
+                venv,
+                learning_rate=_lr_schedule(cfg),
+                n_steps=cfg.n_steps,
+                batch_size=cfg.batch_size,
+                n_epochs=cfg.n_epochs,
+                gamma=cfg.gamma,
+                gae_lambda=cfg.gae_lambda,
+                clip_range=cfg.clip_range,
+                ent_coef=cfg.ent_coef,
+                seed=cfg.seed,
+                device="cpu",
+                verbose=0,
+                policy_kwargs={"net_arch": list(cfg.net_arch)},
+                tensorboard_log=str(out / "tb"),
+            )
         else:  # next phase: same model and statistics, new backend
             stats = model.get_vec_normalize_env()
+            assert stats is not None  # every model here is trained under VecNormalize
             new = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
             new.obs_rms, new.ret_rms = stats.obs_rms, stats.ret_rms
             stats.close()
@@ -288,9 +342,13 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = Tr
         if remaining > 0:
             # SB3 counts the schedule over num_timesteps / (num_timesteps + remaining); the
             # total must span all phases, so learn() is told the overall end.
-            model.learn(total_timesteps=cfg.total_timesteps - model.num_timesteps,
-                        reset_num_timesteps=False, callback=Monitor(phase_end),
-                        tb_log_name="ppo", progress_bar=False)  # the callback ends the phase
+            model.learn(
+                total_timesteps=cfg.total_timesteps - model.num_timesteps,
+                reset_num_timesteps=False,
+                callback=Monitor(phase_end),
+                tb_log_name="ppo",
+                progress_bar=False,
+            )  # the callback ends the phase
         state.phase = index + 1
         checkpoint(model, backend)
         phase_start = phase_end
@@ -303,7 +361,6 @@ def train(cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = Tr
 def load_for_env(path: Path, env: Any) -> Any:
     """A `policy(env, obs) -> action` from a saved run folder's model.zip, checked against env."""
     from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecNormalize
 
     folder = path.parent
     meta_path = folder / "meta.json"
@@ -317,9 +374,11 @@ def load_for_env(path: Path, env: Any) -> Any:
     if model.action_space.shape != env.action_space.shape or (
         want != (None, None) and want != (mission.n_auvs, mission.n_nodes)
     ):
-        raise ValueError(f"policy {path} was trained for N={want[0]}, K={want[1]} "
-                         f"(action space {model.action_space}); this env has "
-                         f"N={mission.n_auvs}, K={mission.n_nodes}")
+        raise ValueError(
+            f"policy {path} was trained for N={want[0]}, K={want[1]} "
+            f"(action space {model.action_space}); this env has "
+            f"N={mission.n_auvs}, K={mission.n_nodes}"
+        )
     stats_path = folder / "vecnormalize.pkl"
     stats = None
     if stats_path.is_file():

@@ -11,7 +11,7 @@ import pytest
 from iout_mj.baselines import POLICIES, make_policy
 from iout_mj.envs import ENV_ID
 from iout_mj.evaluation import SUMMARY_KEYS, evaluate, scenario_config
-from iout_mj.missions import run_episode, load_policy
+from iout_mj.missions import load_policy, run_episode
 
 
 @pytest.mark.parametrize("name", sorted(POLICIES))
@@ -40,8 +40,16 @@ def test_greedy_and_planner_dock_in_time(backend, name, n, k):
 
 
 def test_planner_beats_random_walk_on_aoi():
-    rows, _ = evaluate(["planner", "random-walk"], [1, 2], [7], episodes=3, seed=0,
-                       backend="kinematic", workers=1, progress=False)
+    rows, _ = evaluate(
+        ["planner", "random-walk"],
+        [1, 2],
+        [7],
+        episodes=3,
+        seed=0,
+        backend="kinematic",
+        workers=1,
+        progress=False,
+    )
     aoi = {(r["policy"], r["n_auvs"]): r["mean_aoi"] for r in rows}
     for n in (1, 2):
         assert aoi[("planner", n)] < 0.8 * aoi[("random-walk", n)]
@@ -49,10 +57,32 @@ def test_planner_beats_random_walk_on_aoi():
 
 def test_evaluate_json_has_every_key_and_figures(tmp_path):
     out = subprocess.run(
-        [sys.executable, "-m", "iout_mj.cli", "evaluate", "--policy", "greedy", "planner",
-         "--n-auvs", "1", "2", "--nodes", "5", "7", "--episodes", "2", "--backend",
-         "kinematic", "--json", "--out", str(tmp_path)], capture_output=True, text=True,
-        check=True)
+        [
+            sys.executable,
+            "-m",
+            "iout_mj.cli",
+            "evaluate",
+            "--policy",
+            "greedy",
+            "planner",
+            "--n-auvs",
+            "1",
+            "2",
+            "--nodes",
+            "5",
+            "7",
+            "--episodes",
+            "2",
+            "--backend",
+            "kinematic",
+            "--json",
+            "--out",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     rows = json.loads(out.stdout)
     assert len(rows) == 2 * 2 * 2
     keys = {"policy", "n_auvs", "n_nodes", "backend", "episodes"}
@@ -61,14 +91,18 @@ def test_evaluate_json_has_every_key_and_figures(tmp_path):
         assert keys <= set(r)
         assert r["episodes"] == 2
     assert (tmp_path / "results.csv").read_text().startswith("policy,n_auvs,n_nodes")
-    out = subprocess.run([sys.executable, "-m", "iout_mj.cli", "figures", "--results",
-                          str(tmp_path)], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "iout_mj.cli", "figures", "--results", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     pngs = out.stdout.split()
     assert len(pngs) == 5
     for p in pngs:
         with open(p, "rb") as f:
-            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
-        assert len(open(p, "rb").read()) > 10_000
+            data = f.read()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
 
 
 def test_same_seed_same_start_for_every_policy():
@@ -89,6 +123,9 @@ def test_bad_policy_names_and_files(tmp_path):
     bad.write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="cannot load policy"):
         load_policy(str(bad), env)
-    out = subprocess.run([sys.executable, "-m", "iout_mj.cli", "evaluate", "--policy", "nope",
-                          "--episodes", "1"], capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "iout_mj.cli", "evaluate", "--policy", "nope", "--episodes", "1"],
+        capture_output=True,
+        text=True,
+    )
     assert out.returncode == 2 and "unknown policy 'nope'" in out.stderr

@@ -16,9 +16,19 @@ pytestmark = pytest.mark.slow
 
 
 def small(**kw):
-    base = dict(name="t", n_auvs=1, n_nodes=7, n_envs=2, n_steps=64, batch_size=64,
-                n_epochs=1, net_arch=(32, 32), eval_every_steps=128, eval_episodes=1,
-                phases=(PhaseConfig("kinematic", 128), PhaseConfig("mujoco", 128)))
+    base = dict(
+        name="t",
+        n_auvs=1,
+        n_nodes=7,
+        n_envs=2,
+        n_steps=64,
+        batch_size=64,
+        n_epochs=1,
+        net_arch=(32, 32),
+        eval_every_steps=128,
+        eval_episodes=1,
+        phases=(PhaseConfig("kinematic", 128), PhaseConfig("mujoco", 128)),
+    )
     base.update(kw)
     return TrainConfig(**base)
 
@@ -30,7 +40,10 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
     assert [h["backend"] for h in state.history][-1] == "mujoco"
     for folder in ("last", "best"):
         assert {p.name for p in (tmp_path / folder).iterdir()} == {
-            "model.zip", "vecnormalize.pkl", "meta.json"}
+            "model.zip",
+            "vecnormalize.pkl",
+            "meta.json",
+        }
     env = gym.make(ENV_ID, backend="mujoco", n_auvs=1, n_nodes=7)
     policy = load_policy(str(tmp_path / "last"), env)
     obs, _ = env.reset(seed=3)
@@ -39,8 +52,13 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
 
     # resume: a longer schedule with the same config is refused; the same config continues
     with pytest.raises(ConfigError, match="different config"):
-        train(small(phases=(PhaseConfig("kinematic", 128), PhaseConfig("mujoco", 512))),
-              tmp_path, resume=True, progress=False, subproc=False)
+        train(
+            small(phases=(PhaseConfig("kinematic", 128), PhaseConfig("mujoco", 512))),
+            tmp_path,
+            resume=True,
+            progress=False,
+            subproc=False,
+        )
     with pytest.raises(FileExistsError, match="--resume"):
         train(cfg, tmp_path, progress=False, subproc=False)
     state_file = json.loads((tmp_path / "state.json").read_text())
@@ -51,8 +69,7 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
 
 
 def test_policy_for_other_scenario_is_refused(tmp_path):
-    train(small(phases=(PhaseConfig("kinematic", 64),)), tmp_path, progress=False,
-          subproc=False)
+    train(small(phases=(PhaseConfig("kinematic", 64),)), tmp_path, progress=False, subproc=False)
     env = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=7)
     with pytest.raises(ValueError, match=r"trained for N=1, K=7.*this env has N=2, K=7"):
         load_policy(str(tmp_path / "last"), env)
@@ -61,10 +78,25 @@ def test_policy_for_other_scenario_is_refused(tmp_path):
 def test_train_cli_rejects_bad_configs(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("n_envs: 2\nn_steps: 10\nbatch_size: 7\n")
-    out = subprocess.run([sys.executable, "-m", "iout_mj.cli", "train", "--config", str(bad),
-                          "--out", str(tmp_path / "r")], capture_output=True, text=True)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "iout_mj.cli",
+            "train",
+            "--config",
+            str(bad),
+            "--out",
+            str(tmp_path / "r"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert out.returncode == 2 and "batch_size=7 must divide" in out.stderr
     bad.write_text("learning_rat: 0.1\n")
-    out = subprocess.run([sys.executable, "-m", "iout_mj.cli", "train", "--config", str(bad)],
-                         capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "iout_mj.cli", "train", "--config", str(bad)],
+        capture_output=True,
+        text=True,
+    )
     assert out.returncode == 2 and "unknown key" in out.stderr
