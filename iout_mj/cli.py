@@ -158,6 +158,16 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from iout_mj.bench import format_table, run_all
+
+    result = run_all(quick=args.quick)
+    if args.out:
+        Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result, indent=2) if args.json else format_table(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="iout-mj", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -217,6 +227,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="run folder (default runs/<name>)")
     p.add_argument("--resume", action="store_true", help="continue from <out>/last")
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("bench", help="throughput benchmarks (ratios measured in one run)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test)")
+    p.add_argument("--out", help="also write the JSON here")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("figures", help="the paper's figures from saved evaluation results")
     p.add_argument("--results", required=True, help="folder written by evaluate --out")
