@@ -86,7 +86,7 @@ class TrivialEnv:
                 ref = _env("kinematic", n, k)
                 self.action_space = ref.action_space
                 self.observation_space = ref.observation_space
-                self._obs = np.zeros(self.observation_space.shape, dtype=np.float32)
+                self._obs = np.zeros(ref.observation_space.shape or (), dtype=np.float32)
                 self._t = 0
 
             def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
