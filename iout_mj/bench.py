@@ -81,7 +81,7 @@ class TrivialEnv:
     def __new__(cls, n: int, k: int) -> Any:
         import gymnasium as gym
 
-        class _Trivial(gym.Env):  # type: ignore[type-arg]
+        class _Trivial(gym.Env):
             def __init__(self) -> None:
                 ref = _env("kinematic", n, k)
                 self.action_space = ref.action_space

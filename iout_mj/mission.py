@@ -52,6 +52,11 @@ ENERGY_OBS_REF_J = 1e-3
 """Node energies are observed as log10(1 + e / 1 mJ) / 5 (1 mJ is a typical uplink need)."""
 
 
+def _norm(v: FloatArray) -> FloatArray:
+    """Length of each row of an (M, 2) array."""
+    return np.hypot(v[:, 0], v[:, 1])
+
+
 class ActionError(ValueError):
     """An action outside the action space."""
 
@@ -92,6 +97,8 @@ class Mission:
         )
         iu, ju = np.triu_indices(self.n_auvs, k=1)
         self._pairs = (iu, ju)
+        self._inv_area = 1.0 / self.area_m
+        self._inv_diag = 1.0 / float(np.hypot(*self.area_m))
         self.log = MissionLog()
 
     # ------------------------------------------------------------------ episode
@@ -133,7 +140,7 @@ class Mission:
         self.boundary_attempt = np.zeros(n, dtype=bool)
         self.outcome: Any = None
         self.log = MissionLog()
-        self._log_slot()
+        self._log_slot(self.network.mean_aoi, self.network.jain)
         return start, heading, speed
 
     # ------------------------------------------------------------------ actions
@@ -205,7 +212,7 @@ class Mission:
         """
         cfg, w = self.cfg, self.cfg.reward
         was_docked = self.docked
-        moved_m = np.linalg.norm(positions_m - self.positions_m, axis=1)
+        moved_m = _norm(positions_m - self.positions_m)
         self.positions_m = positions_m
         self.headings_rad = headings_rad
         self.speeds_mps = speeds_mps
@@ -217,19 +224,20 @@ class Mission:
         active = ~was_docked
         out = self.network.step(positions_m, self.action[:, 2], self.action[:, 3], active)
         self.outcome = out
-        dock_dist = np.linalg.norm(positions_m - self.dock_m, axis=1)
+        dock_dist = _norm(positions_m - self.dock_m)
         self.docked = was_docked | (dock_dist <= cfg.scenario.dock_radius_m)
         newly = self.docked & ~was_docked
 
         mean_aoi = self.network.mean_aoi
         jain = self.network.jain
+        delivered_total = int(self.network.deliveries.sum())
         t = self.terms
         progress_m = float(np.sum(self.dock_dist_m - dock_dist))
         t["docking_progress"] = w.docking_progress_per_m * progress_m
         t["aoi"] = -w.aoi * mean_aoi
         t["fairness"] = (
             -w.fairness * (1.0 - jain)
-            if self.network.deliveries.sum() > w.fairness_min_deliveries
+            if delivered_total > w.fairness_min_deliveries
             else 0.0
         )
         t["boundary"] = -w.boundary * float(self.boundary_attempt.sum())
@@ -260,7 +268,7 @@ class Mission:
             if gap.size:
                 self.min_separation_m = min(self.min_separation_m, float(gap.min()))
                 self.collisions += int(np.sum(gap < COLLISION_DISTANCE_M))
-        self._log_slot()
+        self._log_slot(mean_aoi, jain)
         return self.reward
 
     def _collision_term(self, positions_m: FloatArray) -> float:
@@ -268,19 +276,19 @@ class Mission:
             return 0.0
         w = self.cfg.reward
         iu, ju = self._pairs
-        d = np.linalg.norm(positions_m[iu] - positions_m[ju], axis=1)
+        d = _norm(positions_m[iu] - positions_m[ju])
         gap = np.maximum(0.0, w.safety_distance_m - d)
         pen = 1.0 - np.exp(-(gap**2) / (2 * w.collision_sigma_m**2))
         pen = np.where(self.docked[iu] & self.docked[ju], 0.0, pen)
         return -w.collision * float(pen.sum())
 
-    def _log_slot(self) -> None:
+    def _log_slot(self, mean_aoi: float, jain: float) -> None:
         log = self.log
         log.positions_m.append(self.positions_m.copy())
         log.headings_rad.append(self.headings_rad.copy())
         log.speeds_mps.append(self.speeds_mps.copy())
-        log.mean_aoi.append(self.network.mean_aoi)
-        log.jain.append(self.network.jain)
+        log.mean_aoi.append(mean_aoi)
+        log.jain.append(jain)
         if self.outcome is not None:
             log.aet_nodes.append(self.action[:, 2].copy())
             log.uplink_nodes.append(self.action[:, 3].copy())
@@ -334,9 +342,10 @@ class Mission:
     def observation(self) -> dict[str, NDArray[np.float64]]:
         """The paper's state, scaled to about unit range (see `OBSERVATION_DOC`)."""
         sc = self.cfg.scenario
-        d = pairwise_distance_m(self.positions_m, self.network.nodes_m)
+        d = (pairwise_distance_m(self.positions_m, self.network.nodes_m)
+             if self.outcome is None else self.outcome.distance_m)  # end-of-slot distances
         return {
-            "auv_position": (self.positions_m / self.area_m).ravel(),
+            "auv_position": (self.positions_m * self._inv_area).ravel(),
             "auv_heading": np.stack(
                 [np.cos(self.headings_rad), np.sin(self.headings_rad)], axis=1
             ).ravel(),
@@ -346,8 +355,8 @@ class Mission:
             "node_energy": np.minimum(
                 np.log10(1 + self.network.energy_j / ENERGY_OBS_REF_J) / 5, OBS_HIGH
             ),
-            "distance": (d / float(np.hypot(*self.area_m))).ravel(),
-            "dock_distance": self.dock_dist_m / float(np.hypot(*self.area_m)),
+            "distance": (d * self._inv_diag).ravel(),
+            "dock_distance": self.dock_dist_m * self._inv_diag,
             "time_remaining": np.array([1 - self.slot / sc.horizon_slots]),
         }
 

@@ -37,7 +37,7 @@ def jain_index(counts: ArrayLike) -> float:
 def pairwise_distance_m(auv_xy: ArrayLike, nodes_xy: ArrayLike) -> FloatArray:
     """Distances (N, K) between N AUV positions and K node positions."""
     diff = np.asarray(auv_xy, dtype=float)[:, None, :] - np.asarray(nodes_xy, dtype=float)[None]
-    return np.sqrt(np.einsum("nkd,nkd->nk", diff, diff))
+    return np.hypot(diff[..., 0], diff[..., 1])
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,7 @@ class SensorNetwork:
         self.cfg = network
         self.acoustic = acoustic
         self.bits_per_delivery = acoustics.bits_per_delivery(acoustic)
+        self.link = acoustics.LinkBudget(acoustic)
         k = len(self.nodes_m)
         self.energy_j = np.zeros(k)
         self.aoi = np.zeros(k)
@@ -114,8 +115,7 @@ class SensorNetwork:
         act = np.asarray(active, dtype=bool)
         n_idx = np.arange(len(data))
         d = pairwise_distance_m(auv_xy, self.nodes_m)
-        req_all = acoustics.uplink_energy_j(d, self.acoustic)
-        harvest_all = acoustics.harvest_energy_j(d, self.acoustic)
+        harvest_all, req_all = self.link.energies_j(d)
 
         named = (np.arange(k)[None, :] == data[:, None]) & act[:, None]
         req_node = np.where(named, req_all, np.inf).min(axis=0)

@@ -90,3 +90,12 @@ def test_vectorised_over_auvs_by_nodes():
     assert out.shape == (2, 3)
     assert out[0, 1] == pytest.approx(acoustics.uplink_energy_j(100.0, CFG))
     assert np.all(np.diff(acoustics.harvest_power_w([10, 100, 500, 1000], CFG)) < 0)
+
+
+@pytest.mark.parametrize("noise", ["flat", "wenz"])
+def test_link_budget_fast_path_matches_the_equations(noise):
+    cfg = AcousticsConfig(noise_model=noise, wind_speed_mps=5.0)
+    d = np.array([[0.5, 10.0, 100.0], [333.0, 1000.0, 2500.0]])
+    harvest, uplink = acoustics.LinkBudget(cfg).energies_j(d)
+    np.testing.assert_allclose(harvest, acoustics.harvest_energy_j(d, cfg), rtol=1e-12)
+    np.testing.assert_allclose(uplink, acoustics.uplink_energy_j(d, cfg), rtol=1e-12)
