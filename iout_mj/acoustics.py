@@ -107,19 +107,25 @@ class LinkBudget:
     """The same link budget with every distance-independent term folded into a constant, for
     the per-slot hot path: per distance, one power and two exponentials.
 
-    harvest(d) = c_h d^-k_s 10^(-alpha_wet d / 10^4),  uplink(d) = c_u d^k_s 10^(alpha_data d / 10^4)
+    harvest(d) = c_h d^-k_s 10^(-alpha_wet d / 10^4)
+    uplink(d) = c_u d^k_s 10^(alpha_data d / 10^4)
     """
 
     def __init__(self, cfg: AcousticsConfig):
         sl = source_level_db(cfg.p_tx_w, cfg.eta_tx, cfg.di_tx_db)
         self.spreading = cfg.spreading_factor
-        self._c_harvest_j = (cfg.eta_harv * cfg.n_hydrophones * cfg.charging_s
-                             * 10 ** ((sl + cfg.di_rx_db + cfg.rvs_db) / 10)
-                             / (4 * cfg.load_resistance_ohm))
+        self._c_harvest_j = (
+            cfg.eta_harv
+            * cfg.n_hydrophones
+            * cfg.charging_s
+            * 10 ** ((sl + cfg.di_rx_db + cfg.rvs_db) / 10)
+            / (4 * cfg.load_resistance_ohm)
+        )
         nl_band = float(noise_psd_db(cfg.f_data_khz, cfg)) + 10 * np.log10(cfg.bandwidth_hz)
         self._c_uplink_j = cfg.data_s * 10 ** (
-            (required_snr_db(cfg) + nl_band - SL_REF_DB - 10 * np.log10(cfg.eta_tx)
-             - cfg.di_tx_db) / 10)
+            (required_snr_db(cfg) + nl_band - SL_REF_DB - 10 * np.log10(cfg.eta_tx) - cfg.di_tx_db)
+            / 10
+        )
         ln10 = np.log(10.0)
         self._k_wet = -float(thorp_absorption_db_per_km(cfg.f_wet_khz)) * ln10 / 1e4
         self._k_data = float(thorp_absorption_db_per_km(cfg.f_data_khz)) * ln10 / 1e4
@@ -128,8 +134,10 @@ class LinkBudget:
         """(harvested energy per slot, uplink energy E_req) at each distance."""
         d = np.maximum(distance_m, MIN_DISTANCE_M)
         spread = d**self.spreading
-        return (self._c_harvest_j * np.exp(self._k_wet * d) / spread,
-                self._c_uplink_j * np.exp(self._k_data * d) * spread)
+        return (
+            self._c_harvest_j * np.exp(self._k_wet * d) / spread,
+            self._c_uplink_j * np.exp(self._k_data * d) * spread,
+        )
 
 
 def bits_per_delivery(cfg: AcousticsConfig) -> float:

@@ -67,8 +67,7 @@ def slot_vs_raw(n: int, k: int, slots: int = 40) -> dict[str, float]:
     raw()
     raw_rate = _median_rate(raw)
     env.close()
-    return {"env_steps_per_s": env_rate, "raw_slots_per_s": raw_rate,
-            "ratio": env_rate / raw_rate}
+    return {"env_steps_per_s": env_rate, "raw_slots_per_s": raw_rate, "ratio": env_rate / raw_rate}
 
 
 def kinematic_rate(n: int, k: int, steps: int = 3000) -> float:
@@ -105,8 +104,9 @@ def _trivial_factory(n: int, k: int) -> Any:
     return TrivialEnv(n, k)
 
 
-def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, n_steps: int,
-            rollouts: int = 2) -> float:
+def ppo_fps(
+    backend: str | None, n: int, k: int, n_envs: int, n_steps: int, rollouts: int = 2
+) -> float:
     """PPO steps/s (collection + updates) with SubprocVecEnv workers; None = trivial env."""
     from functools import partial
 
@@ -119,11 +119,22 @@ def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, n_steps: int,
     torch.set_num_threads(1)
     batch = min(512, n_envs * n_steps)
     cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs, n_steps=n_steps, batch_size=batch)
-    fns: list[Any] = [partial(make_env, cfg, backend, i) if backend else
-                      partial(_trivial_factory, n, k) for i in range(n_envs)]
+    fns: list[Any] = [
+        partial(make_env, cfg, backend, i) if backend else partial(_trivial_factory, n, k)
+        for i in range(n_envs)
+    ]
     venv = VecNormalize(SubprocVecEnv(fns, start_method="spawn"))
-    model = PPO("MlpPolicy", venv, n_steps=n_steps, batch_size=batch, n_epochs=10, device="cpu",
-                policy_kwargs={"net_arch": [256, 256]}, verbose=0, seed=0)
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=n_steps,
+        batch_size=batch,
+        n_epochs=10,
+        device="cpu",
+        policy_kwargs={"net_arch": [256, 256]},
+        verbose=0,
+        seed=0,
+    )
     model.learn(n_envs * n_steps)  # warm up (worker start, first update)
     t = time.perf_counter()
     model.learn(rollouts * n_envs * n_steps, reset_num_timesteps=False)
@@ -140,8 +151,9 @@ def _worker_rate(workers: int, n: int, k: int, steps: int) -> float:
     from iout_mj.training import TrainConfig, make_env
 
     cfg = TrainConfig(n_auvs=n, n_nodes=k)
-    venv = SubprocVecEnv([partial(make_env, cfg, "mujoco", i) for i in range(workers)],
-                         start_method="spawn")
+    venv = SubprocVecEnv(
+        [partial(make_env, cfg, "mujoco", i) for i in range(workers)], start_method="spawn"
+    )
     venv.reset()
     rng = np.random.default_rng(0)
     nvec = venv.action_space.nvec  # type: ignore[attr-defined]
@@ -193,13 +205,21 @@ def memory_mb(n_envs: int = 8) -> dict[str, float]:
     import subprocess
     import sys
 
-    code = ("import gymnasium as gym, iout_mj\n"
-            "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=2, n_nodes=7)\n"
-            "env.reset(seed=0)\n"
-            "for _ in range(55): env.step(env.action_space.sample())\n"
-            "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n")
-    one = int(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             check=True).stdout.split()[-1]) / 1024
+    code = (
+        "import gymnasium as gym, iout_mj\n"
+        "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=2, n_nodes=7)\n"
+        "env.reset(seed=0)\n"
+        "for _ in range(55): env.step(env.action_space.sample())\n"
+        "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
+    )
+    one = (
+        int(
+            subprocess.run(
+                [sys.executable, "-c", code], capture_output=True, text=True, check=True
+            ).stdout.split()[-1]
+        )
+        / 1024
+    )
     from functools import partial
 
     from stable_baselines3 import PPO
@@ -208,10 +228,20 @@ def memory_mb(n_envs: int = 8) -> dict[str, float]:
     from iout_mj.training import TrainConfig, make_env
 
     cfg = TrainConfig(n_auvs=2, n_nodes=7)
-    venv = VecNormalize(SubprocVecEnv([partial(make_env, cfg, "mujoco", i)
-                                       for i in range(n_envs)], start_method="spawn"))
-    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, device="cpu", verbose=0,
-                policy_kwargs={"net_arch": [256, 256]})
+    venv = VecNormalize(
+        SubprocVecEnv(
+            [partial(make_env, cfg, "mujoco", i) for i in range(n_envs)], start_method="spawn"
+        )
+    )
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=64,
+        batch_size=64,
+        device="cpu",
+        verbose=0,
+        policy_kwargs={"net_arch": [256, 256]},
+    )
     model.learn(n_envs * 64)
     pids = [os.getpid()] + [p.pid for p in venv.venv.processes]  # type: ignore[attr-defined]
     train = _rss_mb(pids)
@@ -226,13 +256,15 @@ def run_all(quick: bool = False) -> dict[str, Any]:
     cfg = Config()
     sizes = [(1, 7), (2, 7), (2, 13), (4, 13)] if not quick else [(2, 7)]
     result: dict[str, Any] = {
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "processor": platform.machine()},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "processor": platform.machine(),
+        },
         "timestep_s": cfg.physics.timestep_s,
         "substeps_per_slot": round(cfg.scenario.slot_s / cfg.physics.timestep_s),
     }
-    result["slot_vs_raw"] = {f"N{n}_K{k}": slot_vs_raw(n, k, 10 if quick else 40)
-                             for n, k in sizes}
+    result["slot_vs_raw"] = {f"N{n}_K{k}": slot_vs_raw(n, k, 10 if quick else 40) for n, k in sizes}
     result["kinematic_steps_per_s"] = {
         f"N{n}_K{k}": kinematic_rate(n, k, 300 if quick else 3000)
         for n, k in ([(2, 13)] if quick else [(1, 7), (1, 13), (2, 7), (2, 13), (4, 7), (4, 13)])
@@ -251,20 +283,29 @@ def run_all(quick: bool = False) -> dict[str, Any]:
 
 
 def format_table(r: dict[str, Any]) -> str:
-    lines = [f"machine: {r['machine']['cpus']} CPUs, Python {r['machine']['python']}; physics "
-             f"dt {r['timestep_s']} s, {r['substeps_per_slot']} substeps per 25 s slot", ""]
+    lines = [
+        f"machine: {r['machine']['cpus']} CPUs, Python {r['machine']['python']}; physics "
+        f"dt {r['timestep_s']} s, {r['substeps_per_slot']} substeps per 25 s slot",
+        "",
+    ]
     lines.append("slot_vs_raw (MuJoCo env steps/s over plain mj_step(nstep); target >= 0.9)")
     for key, v in r["slot_vs_raw"].items():
-        lines.append(f"  {key:<7} env {v['env_steps_per_s']:8.1f} /s   raw "
-                     f"{v['raw_slots_per_s']:8.1f} /s   ratio {v['ratio']:.3f}")
+        lines.append(
+            f"  {key:<7} env {v['env_steps_per_s']:8.1f} /s   raw "
+            f"{v['raw_slots_per_s']:8.1f} /s   ratio {v['ratio']:.3f}"
+        )
     lines.append("kinematic_steps_per_s (one core; target >= 15000 for N2_K13)")
     for key, v in r["kinematic_steps_per_s"].items():
         lines.append(f"  {key:<7} {v:10.0f}")
-    lines.append(f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {r['ppo_fps']['physics']:.0f}"
-                 f" / trivial {r['ppo_fps']['trivial']:.0f} steps/s; target >= 0.6)")
+    lines.append(
+        f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {r['ppo_fps']['physics']:.0f}"
+        f" / trivial {r['ppo_fps']['trivial']:.0f} steps/s; target >= 0.6)"
+    )
     lines.append(f"subproc_scaling {r['subproc_scaling']:.3f} (2 workers / 1; target >= 1.8)")
     lines.append(f"render_fps {r['render_fps']:.1f} (640x480, top-down + chase, overlays)")
     mem = r["memory"]
-    lines.append(f"memory: one env {mem['one_env_mb']:.0f} MB; training with "
-                 f"{mem['training_workers']} workers {mem['training_mb']:.0f} MB")
+    lines.append(
+        f"memory: one env {mem['one_env_mb']:.0f} MB; training with "
+        f"{mem['training_workers']} workers {mem['training_mb']:.0f} MB"
+    )
     return "\n".join(lines)

@@ -68,14 +68,7 @@ class KinematicEnvironment(dm_env.Environment):
         return dm_env.transition(m.reward, obs)
 
     def action_spec(self) -> specs.BoundedArray:
-        high = self.mission.action_high
-        return specs.BoundedArray(
-            shape=high.shape,
-            dtype=np.int64,
-            minimum=np.zeros_like(high),
-            maximum=high - 1,
-            name="action",
-        )
+        return self.mission.action_spec()
 
     def observation_spec(self) -> dict[str, specs.Array]:
         return {

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from dm_env import specs
 from numpy.typing import NDArray
 
 from iout_mj.config import Config, random_layout
@@ -171,6 +172,17 @@ class Mission:
             )
         return a.reshape(self.n_auvs, 4)
 
+    def action_spec(self) -> specs.BoundedArray:
+        """The dm_env action spec: 4 integer indices per AUV."""
+        high = self.action_high
+        return specs.BoundedArray(
+            shape=high.shape,
+            dtype=np.int64,
+            minimum=np.zeros_like(high),
+            maximum=high - 1,
+            name="action",
+        )
+
     def begin_slot(self, action: Any) -> tuple[FloatArray, FloatArray]:
         """Apply an action: new heading (unwrapped) and speed setpoints for every AUV."""
         a = self.decode(action)
@@ -236,9 +248,7 @@ class Mission:
         t["docking_progress"] = w.docking_progress_per_m * progress_m
         t["aoi"] = -w.aoi * mean_aoi
         t["fairness"] = (
-            -w.fairness * (1.0 - jain)
-            if delivered_total > w.fairness_min_deliveries
-            else 0.0
+            -w.fairness * (1.0 - jain) if delivered_total > w.fairness_min_deliveries else 0.0
         )
         t["boundary"] = -w.boundary * float(self.boundary_attempt.sum())
         t["stall"] = -w.stall * float(np.sum(active & (moved_m < w.stall_distance_m)))
@@ -342,8 +352,11 @@ class Mission:
     def observation(self) -> dict[str, NDArray[np.float64]]:
         """The paper's state, scaled to about unit range (see `OBSERVATION_DOC`)."""
         sc = self.cfg.scenario
-        d = (pairwise_distance_m(self.positions_m, self.network.nodes_m)
-             if self.outcome is None else self.outcome.distance_m)  # end-of-slot distances
+        d = (
+            pairwise_distance_m(self.positions_m, self.network.nodes_m)
+            if self.outcome is None
+            else self.outcome.distance_m
+        )  # end-of-slot distances
         return {
             "auv_position": (self.positions_m * self._inv_area).ravel(),
             "auv_heading": np.stack(

@@ -35,14 +35,7 @@ class DataCollectionTask(base.Task):
         physics.set_poses(start, heading, speed)
 
     def action_spec(self, physics: AUVPhysics) -> specs.BoundedArray:
-        high = self.mission.action_high
-        return specs.BoundedArray(
-            shape=high.shape,
-            dtype=np.int64,
-            minimum=np.zeros_like(high),
-            maximum=high - 1,
-            name="action",
-        )
+        return self.mission.action_spec()
 
     def before_step(self, action: Any, physics: AUVPhysics) -> None:
         heading_sp, speed_sp = self.mission.begin_slot(action)

@@ -97,20 +97,26 @@ class TrainConfig:
         return d
 
 
-def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
-    """A monitored gymnasium env for training (a picklable factory target)."""
+def scenario_env(cfg: TrainConfig, backend: str) -> Any:
+    """The gymnasium env of the config's scenario."""
     import gymnasium as gym
-    from stable_baselines3.common.monitor import Monitor
 
-    import iout_mj  # noqa: F401  (registers the env in the worker)
+    import iout_mj  # noqa: F401  (registers the env, also in a fresh worker process)
 
-    env = gym.make(
+    return gym.make(
         "iout_mj/MultiAUV-v0",
         n_auvs=cfg.n_auvs,
         n_nodes=cfg.n_nodes,
         backend=backend,
         layout=cfg.layout,
     )
+
+
+def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
+    """A monitored env for training (a picklable factory target)."""
+    from stable_baselines3.common.monitor import Monitor
+
+    env = scenario_env(cfg, backend)
     env.reset(seed=seed)
     return Monitor(env)
 
@@ -166,15 +172,7 @@ def evaluate_policy_metrics(
     seed: int = HELD_OUT_SEED,
 ) -> dict[str, float]:
     """Deterministic episodes on held-out seeds; mean metrics and return."""
-    import gymnasium as gym
-
-    env = gym.make(
-        "iout_mj/MultiAUV-v0",
-        n_auvs=cfg.n_auvs,
-        n_nodes=cfg.n_nodes,
-        backend=backend,
-        layout=cfg.layout,
-    )
+    env = scenario_env(cfg, backend)
     rows = []
     for e in range(episodes):
         obs, _ = env.reset(seed=seed + e)
