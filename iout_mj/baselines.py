@@ -20,7 +20,7 @@ IntArray = NDArray[np.int64]
 NODE_REACHED_M = 60.0
 """A node is 'being visited' within this distance."""
 CRUISE_MPS = 3.0
-DOCK_MARGIN_SLOTS = 4.0
+DOCK_MARGIN_SLOTS = 6.0
 
 
 class Policy(Protocol):
@@ -50,7 +50,7 @@ def steer(
 
 def approach_speed(distance_m: NDArray[np.float64], slot_s: float) -> NDArray[np.float64]:
     """Cruise far away, slow down near the target so the turning circle fits (>= 0.8 m/s)."""
-    return np.clip(distance_m / (2.0 * slot_s), 0.8, CRUISE_MPS)
+    return np.clip(distance_m / (4.0 * slot_s), 0.8, CRUISE_MPS)
 
 
 def _slots_left(mission: Mission) -> float:
