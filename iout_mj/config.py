@@ -197,8 +197,8 @@ class NetworkConfig:
 class RewardConfig:
     """Weights of the paper's reward equation; values from the authors' code except where noted."""
 
-    docking_progress_per_m: float = 0.01
-    """alpha_g; the paper gives no value: 0.01 makes a full approach worth about 10."""
+    docking_progress_per_m: float = 0.02
+    """alpha_g; the paper gives no value: 0.02 makes a full approach worth about 22."""
     aoi: float = 0.1
     fairness: float = 2.0
     fairness_min_deliveries: int = 3
@@ -217,6 +217,13 @@ class RewardConfig:
     """d_th."""
     dock_first_entry: float = 60.0
     dock_all: float = 10.0
+    undocked_at_end: float = 100.0
+    """Penalty per AUV not docked when the episode ends: the terminal constraint (12a),
+    l_n(T) in G, as a reward term (the paper states it as a constraint; the value is ours)."""
+    deadline_per_m: float = 0.1
+    """Deadline shaping (ours): potential -max(0, d_dock - v_ref * time left) per AUV."""
+    deadline_speed_mps: float = 2.0
+    """v_ref of the deadline shaping: the speed at which the dock is still reachable in time."""
     fairness_lambda: float = 1.0
     """lambda_f of the objective P1 (not a reward weight; used for the reported objective)."""
 

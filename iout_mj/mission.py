@@ -44,6 +44,8 @@ REWARD_TERMS = (
     "infeasible_uplink",
     "collision",
     "docking",
+    "deadline",
+    "undocked_at_end",
 )
 COLLISION_DISTANCE_M = 5.0
 """Two hulls (3 m long) closer than this in a slot count as one collision (per pair and slot)."""
@@ -130,6 +132,7 @@ class Mission:
         self.propulsion_energy_j = np.zeros(n)
         self.yaw_energy_j = np.zeros(n)
         self.dock_dist_m = np.linalg.norm(start - self.dock_m, axis=1)
+        self.deadline_slack_m = self._deadline_slack_m(self.dock_dist_m, 0)
         self.slot = 0
         self.sum_mean_aoi = 0.0
         self.sum_objective = 0.0
@@ -265,6 +268,12 @@ class Mission:
             bonus += w.dock_all
             self.all_docked_paid = True
         t["docking"] = bonus
+        slack = self._deadline_slack_m(dock_dist, self.slot + 1)
+        t["deadline"] = w.deadline_per_m * float(np.sum(self.deadline_slack_m - slack))
+        self.deadline_slack_m = slack
+        ending = (self.docked.all() or (self.battery_j <= 0).any()
+                  or self.slot + 1 >= cfg.scenario.horizon_slots)
+        t["undocked_at_end"] = -w.undocked_at_end * float((~self.docked).sum()) if ending else 0.0
         self.reward = float(sum(t.values()))
 
         self.dock_dist_m = dock_dist
@@ -280,6 +289,13 @@ class Mission:
                 self.collisions += int(np.sum(gap < COLLISION_DISTANCE_M))
         self._log_slot(mean_aoi, jain)
         return self.reward
+
+    def _deadline_slack_m(self, dock_dist_m: FloatArray, slot: int) -> FloatArray:
+        """How much farther from the dock each undocked AUV is than it can fly at v_ref in the
+        time left (0 when on schedule or docked); its negative is the shaping potential."""
+        sc, w = self.cfg.scenario, self.cfg.reward
+        reach_m = w.deadline_speed_mps * (sc.horizon_slots - slot) * sc.slot_s
+        return np.where(self.docked, 0.0, np.maximum(0.0, dock_dist_m - reach_m))
 
     def _collision_term(self, positions_m: FloatArray) -> float:
         if self.n_auvs < 2:

@@ -192,8 +192,17 @@ def test_docking_terminates_with_bonus(backend):
 def test_truncation_at_horizon(backend):
     env = make(backend, config=scenario(make_config(2, 7), horizon_slots=3))
     env.reset(seed=0)
-    flags = [env.step(np.array([5, 3, 0, 0, 5, 3, 1, 1]))[2:4] for _ in range(3)]
-    assert flags == [(False, False), (False, False), (False, True)]
+    steps = [env.step(np.array([5, 3, 0, 0, 5, 3, 1, 1])) for _ in range(3)]
+    assert [s[2:4] for s in steps] == [(False, False), (False, False), (False, True)]
+    terms = [s[4]["reward_terms"] for s in steps]
+    assert [t["undocked_at_end"] for t in terms] == [0.0, 0.0, -200.0]  # both missed the dock
+    # deadline shaping: 3-slot horizon, v_ref 2 m/s: the dock (~1000 m) is out of reach
+    m = env.unwrapped.mission
+    assert all(t["deadline"] < 0 for t in terms)
+    start_dist = np.linalg.norm(m.log.positions_m[0] - m.dock_m, axis=1)
+    slack_start = np.maximum(0.0, start_dist - 2.0 * 3 * 25)  # potential telescopes
+    total = sum(t["deadline"] for t in terms)
+    assert total == pytest.approx(0.1 * float(np.sum(slack_start - m.dock_dist_m)))
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
