@@ -91,13 +91,17 @@ def figures_from_results(results: Path, out: Path) -> list[Path]:
     traces_path = results / "traces.json"
     traces = json.loads(traces_path.read_text()) if traces_path.is_file() else {}
     if traces:
-        fig, axes = plt.subplots(1, len(traces), figsize=(4.6 * len(traces), 4.8))
-        for ax, (label, tr) in zip(np.atleast_1d(axes), sorted(traces.items()), strict=True):
+        cols = min(4, len(traces))
+        rows = -(-len(traces) // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 4.6 * rows), squeeze=False)
+        for ax in axes.ravel()[len(traces):]:
+            ax.set_visible(False)
+        for ax, (label, tr) in zip(axes.ravel(), sorted(traces.items()), strict=False):
             trajectory_figure(tr, out, title=label, ax=ax)
         fig.suptitle("Trajectories and data collected per node, K = 7 (paper Fig. 3)")
         fig.tight_layout()
         p = out / "fig3_trajectories_k7.png"
-        fig.savefig(p, dpi=130)
+        fig.savefig(p, dpi=90)
         plt.close(fig)
         paths.append(p)
         single = {k: v for k, v in traces.items() if k.endswith("N=1")}
