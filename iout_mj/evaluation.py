@@ -22,6 +22,7 @@ from iout_mj.config import PAPER_LAYOUTS, Config, make_config
 
 SUMMARY_KEYS = (
     "mean_aoi",
+    "mean_aoi_horizon",
     "objective",
     "jain",
     "delivered_bits",
@@ -84,6 +85,7 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for (policy, n, k, backend), eps in sorted(groups.items()):
         values = {
             "mean_aoi": [e["mean_aoi"] for e in eps],
+            "mean_aoi_horizon": [e["mean_aoi_horizon"] for e in eps],
             "objective": [e["objective"] for e in eps],
             "jain": [e["jain"] for e in eps],
             "delivered_bits": [e["delivered_bits"] for e in eps],

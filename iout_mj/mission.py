@@ -46,6 +46,7 @@ REWARD_TERMS = (
     "docking",
     "deadline",
     "undocked_at_end",
+    "aoi_after_mission",
 )
 COLLISION_DISTANCE_M = 5.0
 """Two hulls (3 m long) closer than this in a slot count as one collision (per pair and slot)."""
@@ -136,6 +137,7 @@ class Mission:
         self.slot = 0
         self.sum_mean_aoi = 0.0
         self.sum_objective = 0.0
+        self.aoi_after_mission = 0.0
         self.min_separation_m = np.inf
         self.collisions = 0
         self.all_docked_paid = False
@@ -274,6 +276,10 @@ class Mission:
         ending = (self.docked.all() or (self.battery_j <= 0).any()
                   or self.slot + 1 >= cfg.scenario.horizon_slots)
         t["undocked_at_end"] = -w.undocked_at_end * float((~self.docked).sum()) if ending else 0.0
+        # Ending early does not stop the nodes' data from ageing: the AoI term of the slots
+        # left until T_max, with no more service, is booked now (0 when the horizon is reached).
+        self.aoi_after_mission = self._unserved_aoi_sum(self.slot + 1) if ending else 0.0
+        t["aoi_after_mission"] = -w.aoi * self.aoi_after_mission
         self.reward = float(sum(t.values()))
 
         self.dock_dist_m = dock_dist
@@ -289,6 +295,15 @@ class Mission:
                 self.collisions += int(np.sum(gap < COLLISION_DISTANCE_M))
         self._log_slot(mean_aoi, jain)
         return self.reward
+
+    def _unserved_aoi_sum(self, slot: int) -> float:
+        """Sum over the slots left until T_max of the mean AoI if no node is served again."""
+        left = self.cfg.scenario.horizon_slots - slot
+        if left <= 0:
+            return 0.0
+        ages = np.minimum(self.network.aoi[None, :] + np.arange(1, left + 1)[:, None],
+                          self.cfg.network.aoi_max)
+        return float(ages.mean(axis=1).sum())
 
     def _deadline_slack_m(self, dock_dist_m: FloatArray, slot: int) -> FloatArray:
         """How much farther from the dock each undocked AUV is than it can fly at v_ref in the
@@ -335,6 +350,8 @@ class Mission:
         slots = max(self.slot, 1)
         return {
             "mean_aoi": self.sum_mean_aoi / slots,
+            "mean_aoi_horizon": (self.sum_mean_aoi + self.aoi_after_mission)
+            / max(self.slot, self.cfg.scenario.horizon_slots),
             "objective": self.sum_objective / slots,
             "jain": jain_index(self.network.deliveries),
             "delivered_bits": self.network.delivered_bits,

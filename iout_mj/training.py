@@ -187,6 +187,7 @@ def evaluate_policy_metrics(
                     {
                         "return": ret,
                         "mean_aoi": m["mean_aoi"],
+                        "mean_aoi_horizon": m["mean_aoi_horizon"],
                         "jain": m["jain"],
                         "delivered_mbit": m["delivered_bits"] / 1e6,
                         "docked": float(all(m["docked"])),
@@ -199,8 +200,9 @@ def evaluate_policy_metrics(
 
 
 def _score(metrics: dict[str, float]) -> float:
-    """Model selection: docking first, then low mean AoI."""
-    return -metrics["mean_aoi"] - 100.0 * max(0.0, 0.95 - metrics["docked"])
+    """Model selection: docking first, then low AoI over the whole horizon (so that docking
+    early, which shortens the averaging window of the mission mean, does not pay)."""
+    return -metrics["mean_aoi_horizon"] - 100.0 * max(0.0, 0.95 - metrics["docked"])
 
 
 def train(

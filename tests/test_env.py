@@ -186,6 +186,12 @@ def test_docking_terminates_with_bonus(backend):
     assert term and not trunc
     assert info["reward_terms"]["docking"] == 70.0  # 60 first entry + 10 all docked
     assert info["metrics"]["docked"] == [True]
+    # the 54 slots left: every node ages from AoI 2 (after this slot) without service
+    ages = np.minimum(2.0 + np.arange(1, 55), 50.0)
+    assert info["reward_terms"]["aoi_after_mission"] == pytest.approx(-0.1 * ages.sum())
+    m = info["metrics"]
+    assert m["mean_aoi"] == 2.0
+    assert m["mean_aoi_horizon"] == pytest.approx((2.0 + ages.sum()) / 55)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
