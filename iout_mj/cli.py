@@ -108,6 +108,33 @@ def cmd_mission(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_render(args: argparse.Namespace) -> int:
+    from iout_mj.missions import run_mission
+
+    video = Path(args.out)
+    if video.suffix != ".mp4":
+        raise ValueError(f"--out {video}: accepted a path ending in .mp4")
+    for name, value in (("width", args.width), ("height", args.height), ("fps", args.fps)):
+        if (value < 16 and name != "fps") or value < 1:
+            raise ValueError(f"--{name} {value}: accepted a positive size (>= 16 px, fps >= 1)")
+    summary = run_mission(
+        policy=args.policy,
+        n_auvs=args.n_auvs,
+        n_nodes=args.nodes,
+        backend=args.backend,
+        seed=args.seed,
+        out=video.parent,
+        width=args.width,
+        height=args.height,
+        fps=args.fps,
+        slots=args.slots,
+        name=video.stem,
+        config=args.config,
+    )
+    print(f"{video} ({summary['video_frames']} frames), {video.with_suffix('.png')}")
+    return 0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from iout_mj.evaluation import evaluate, format_table, save
 
@@ -168,6 +195,23 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> None:
+    p.add_argument(
+        "--policy",
+        default="planner",
+        help="greedy, round-robin, random-walk, planner, ppo-n1-k7, ppo-n2-k7 or a file",
+    )
+    p.add_argument("--n-auvs", type=int, default=2)
+    p.add_argument("--nodes", type=int, default=7)
+    p.add_argument("--backend", choices=["mujoco", "kinematic"], default="mujoco")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--slots", type=int, default=None, help="stop after this many slots")
+    p.add_argument("--width", type=int, default=width)
+    p.add_argument("--height", type=int, default=height)
+    p.add_argument("--fps", type=int, default=30)
+    p.add_argument("--config", help="YAML/JSON config")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="iout-mj", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -191,19 +235,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_validate_energy)
 
     p = sub.add_parser("mission", help="run one mission: metrics, trajectory figure, video")
-    p.add_argument("--policy", default="planner")
-    p.add_argument("--n-auvs", type=int, default=2)
-    p.add_argument("--nodes", type=int, default=7)
-    p.add_argument("--backend", choices=["mujoco", "kinematic"], default="mujoco")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="renders")
-    p.add_argument("--slots", type=int, default=None, help="stop after this many slots")
+    _mission_arguments(p, width=960, height=540)
+    p.add_argument("--out", default="renders", help="folder for mission.{mp4,png,json}")
     p.add_argument("--no-video", action="store_true")
-    p.add_argument("--width", type=int, default=960)
-    p.add_argument("--height", type=int, default=540)
-    p.add_argument("--fps", type=int, default=30)
-    p.add_argument("--config", help="YAML/JSON config")
     p.set_defaults(func=cmd_mission)
+
+    p = sub.add_parser("render", help="render a mission to MP4 (headless EGL)")
+    _mission_arguments(p, width=1280, height=720)
+    p.add_argument("--out", default="renders/mission.mp4", help="the MP4 to write")
+    p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("evaluate", help="seeded episodes per (policy, N, K): mean and std")
     p.add_argument(

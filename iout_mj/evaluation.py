@@ -156,19 +156,24 @@ def save(rows: list[dict[str, Any]], episodes: list[dict[str, Any]], out: Path) 
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
-    head = (
-        f"{'policy':<14}{'N':>2}{'K':>4} {'mean AoI':>13} {'objective':>13} {'Jain':>11} "
-        f"{'data Mbit':>13} {'energy kJ/AUV':>15} {'docked':>7} {'coll.':>6}"
-    )
-    lines = [head]
+    """Mean ± std per row; AoI(T) is over the mission, AoI(Tmax) over the whole horizon."""
+    cols = [
+        ("mean_aoi", "AoI(T)", 1.0, 2),
+        ("mean_aoi_horizon", "AoI(Tmax)", 1.0, 2),
+        ("objective", "objective", 1.0, 2),
+        ("jain", "Jain", 1.0, 2),
+        ("delivered_bits", "data Mbit", 1e-6, 1),
+        ("propulsion_energy_j", "kJ/AUV", 1e-3, 0),
+    ]
+    head = f"{'policy':<14}{'N':>2}{'K':>4}" + "".join(f"{c[1]:>15}" for c in cols)
+    lines = [head + f"{'docked':>8}{'coll.':>7}"]
     for r in rows:
+        cells = "".join(
+            f"{r[key] * scale:>8.{nd}f} ± {r[key + '_std'] * scale:<4.{nd}f}"
+            for key, _, scale, nd in cols
+        )
         lines.append(
-            f"{r['policy']:<14}{r['n_auvs']:>2}{r['n_nodes']:>4} "
-            f"{r['mean_aoi']:>6.2f} ± {r['mean_aoi_std']:<4.2f} "
-            f"{r['objective']:>6.2f} ± {r['objective_std']:<4.2f} "
-            f"{r['jain']:>4.2f} ± {r['jain_std']:<4.2f} "
-            f"{r['delivered_bits'] / 1e6:>6.1f} ± {r['delivered_bits_std'] / 1e6:<4.1f} "
-            f"{r['propulsion_energy_j'] / 1e3:>7.0f} ± {r['propulsion_energy_j_std'] / 1e3:<5.0f}"
-            f"{r['docking_rate']:>7.0%} {r['collisions']:>6.2f}"
+            f"{r['policy']:<14}{r['n_auvs']:>2}{r['n_nodes']:>4}{cells}"
+            f"{r['docking_rate']:>8.0%}{r['collisions']:>7.2f}"
         )
     return "\n".join(lines)

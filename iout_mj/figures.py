@@ -94,7 +94,7 @@ def figures_from_results(results: Path, out: Path) -> list[Path]:
         cols = min(4, len(traces))
         rows = -(-len(traces) // cols)
         fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 4.6 * rows), squeeze=False)
-        for ax in axes.ravel()[len(traces):]:
+        for ax in axes.ravel()[len(traces) :]:
             ax.set_visible(False)
         for ax, (label, tr) in zip(axes.ravel(), sorted(traces.items()), strict=False):
             trajectory_figure(tr, out, title=label, ax=ax)

@@ -273,8 +273,11 @@ class Mission:
         slack = self._deadline_slack_m(dock_dist, self.slot + 1)
         t["deadline"] = w.deadline_per_m * float(np.sum(self.deadline_slack_m - slack))
         self.deadline_slack_m = slack
-        ending = (self.docked.all() or (self.battery_j <= 0).any()
-                  or self.slot + 1 >= cfg.scenario.horizon_slots)
+        ending = (
+            self.docked.all()
+            or (self.battery_j <= 0).any()
+            or self.slot + 1 >= cfg.scenario.horizon_slots
+        )
         t["undocked_at_end"] = -w.undocked_at_end * float((~self.docked).sum()) if ending else 0.0
         # Ending early does not stop the nodes' data from ageing: the AoI term of the slots
         # left until T_max, with no more service, is booked now (0 when the horizon is reached).
@@ -301,8 +304,9 @@ class Mission:
         left = self.cfg.scenario.horizon_slots - slot
         if left <= 0:
             return 0.0
-        ages = np.minimum(self.network.aoi[None, :] + np.arange(1, left + 1)[:, None],
-                          self.cfg.network.aoi_max)
+        ages = np.minimum(
+            self.network.aoi[None, :] + np.arange(1, left + 1)[:, None], self.cfg.network.aoi_max
+        )
         return float(ages.mean(axis=1).sum())
 
     def _deadline_slack_m(self, dock_dist_m: FloatArray, slot: int) -> FloatArray:

@@ -75,9 +75,10 @@ def run_mission(
     fps: int = 30,
     config: str | None = None,
     slots: int | None = None,
+    name: str = "mission",
 ) -> dict[str, Any]:
-    """Fly one mission and write `mission.json`, `mission_trajectory.png`, and (with `video`)
-    `mission.mp4` plus its last frame `mission.png` into `out`."""
+    """Fly one mission and write `<name>.json`, `<name>_trajectory.png`, and (with `video`)
+    `<name>.mp4` plus its last frame `<name>.png` into `out`."""
     import dataclasses
 
     from iout_mj.envs import resolve_config
@@ -111,7 +112,7 @@ def run_mission(
         use_bundled_ffmpeg()
         env.reset(seed=seed)
         env.render()  # builds the renderer
-        writer = mediapy.VideoWriter(out / "mission.mp4", shape=(height, width), fps=fps)
+        writer = mediapy.VideoWriter(out / f"{name}.mp4", shape=(height, width), fps=fps)
         writer.__enter__()
     last: list[np.ndarray] = []
 
@@ -135,12 +136,12 @@ def run_mission(
     if writer is not None and last:
         import mediapy
 
-        mediapy.write_image(out / "mission.png", last[-1])
+        mediapy.write_image(out / f"{name}.png", last[-1])
     from iout_mj.figures import trajectory_figure
 
     trace = env.unwrapped.mission.trace()  # type: ignore[attr-defined]
     title = f"{policy}, N={n_auvs}, K={n_nodes}, {backend}"
-    trajectory_figure(trace, out / "mission_trajectory.png", title=title)
+    trajectory_figure(trace, out / f"{name}_trajectory.png", title=title)
     summary = {
         "policy": policy,
         "n_auvs": n_auvs,
@@ -151,6 +152,6 @@ def run_mission(
         "video_frames": frames,
         "wall_clock_s": round(elapsed, 2),
     }
-    (out / "mission.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
     env.close()
     return summary
