@@ -100,3 +100,19 @@ def test_train_cli_rejects_bad_configs(tmp_path):
         text=True,
     )
     assert out.returncode == 2 and "unknown key" in out.stderr
+
+
+def test_shipped_policies_load_and_refuse_other_scenarios():
+    from iout_mj.policies import SHIPPED_DIR
+
+    shipped = sorted(p.name for p in SHIPPED_DIR.iterdir() if (p / "model.zip").is_file())
+    assert "ppo-n1-k7" in shipped
+    for name in shipped:
+        n = int(name.split("-")[1][1:])
+        env = gym.make(ENV_ID, backend="kinematic", n_auvs=n, n_nodes=7)
+        policy = load_policy(name, env)
+        obs, _ = env.reset(seed=0)
+        assert env.action_space.contains(policy(env, obs))
+        other = gym.make(ENV_ID, backend="kinematic", n_auvs=n, n_nodes=13)
+        with pytest.raises(ValueError, match="trained for"):
+            load_policy(name, other)
