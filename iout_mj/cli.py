@@ -159,10 +159,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_figures(args: argparse.Namespace) -> int:
-    from iout_mj.figures import figures_from_results
+    from iout_mj.figures import figures_from_results, training_curves
 
-    for path in figures_from_results(Path(args.results), Path(args.out or args.results)):
-        print(path)
+    if not args.results and not args.runs:
+        raise ValueError("figures: give --results DIR and/or --runs RUN [RUN ...]")
+    out = Path(args.out or args.results or "renders")
+    if args.results:
+        for path in figures_from_results(Path(args.results), out):
+            print(path)
+    if args.runs:
+        out.mkdir(parents=True, exist_ok=True)
+        print(training_curves([Path(r) for r in args.runs], out / "training_curves.png"))
     return 0
 
 
@@ -275,7 +282,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("figures", help="the paper's figures from saved evaluation results")
-    p.add_argument("--results", required=True, help="folder written by evaluate --out")
+    p.add_argument("--results", help="folder written by evaluate --out")
+    p.add_argument("--runs", nargs="+", help="training run folders (training curves)")
     p.add_argument("--out", help="folder for the PNGs (default: the results folder)")
     p.set_defaults(func=cmd_figures)
     return parser

@@ -112,6 +112,35 @@ def figures_from_results(results: Path, out: Path) -> list[Path]:
     return paths
 
 
+def training_curves(runs: list[Path], path: Path) -> Path:
+    """Held-out evaluation during training (from each run's state.json) against steps."""
+    import json
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    for run in runs:
+        state = run / "state.json"
+        if not state.is_file():
+            raise FileNotFoundError(f"{state} does not exist: not a training run folder")
+        hist = json.loads(state.read_text())["history"]
+        steps = np.array([h["num_timesteps"] for h in hist]) / 1e3
+        for ax, key in zip(axes, ("mean_aoi_horizon", "jain", "docked"), strict=True):
+            ax.plot(steps, [h[key] for h in hist], marker=".", label=run.name)
+        kinematic = [h["num_timesteps"] / 1e3 for h in hist if h["backend"] == "kinematic"]
+        if kinematic and hist[-1]["backend"] == "mujoco":  # the fine-tuning phase starts here
+            for ax in axes:
+                ax.axvline(max(kinematic), color="gray", lw=0.8, ls=":")
+    titles = ("mean AoI over T_max (slots)", "Jain's index", "docking rate")
+    for ax, title in zip(axes, titles, strict=True):
+        ax.set(xlabel="training steps (thousands)", title=title)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("PPO: deterministic evaluation on 10 held-out seeds (dotted: MuJoCo phase)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def results_figures(rows: list[dict[str, Any]], out: Path) -> list[Path]:
     """Jain and mean AoI vs K per policy and N (paper Fig. 2), energy per policy."""
     out.mkdir(parents=True, exist_ok=True)
