@@ -87,50 +87,45 @@ def cmd_validate_energy(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_mission(args: argparse.Namespace) -> int:
+def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) -> dict[str, Any]:
+    """run_mission with the arguments of `_mission_arguments`, checked."""
     from iout_mj.missions import run_mission
 
-    summary = run_mission(
+    for flag, value, low in (
+        ("width", args.width, 16),
+        ("height", args.height, 16),
+        ("fps", args.fps, 1),
+    ):
+        if value < low:
+            raise ValueError(f"--{flag} {value}: accepted an integer >= {low}")
+    return run_mission(
         policy=args.policy,
         n_auvs=args.n_auvs,
         n_nodes=args.nodes,
         backend=args.backend,
         seed=args.seed,
-        out=Path(args.out),
-        video=not args.no_video,
+        out=out,
+        video=video,
         width=args.width,
         height=args.height,
         fps=args.fps,
         config=args.config,
         slots=args.slots,
+        name=name,
     )
+
+
+def cmd_mission(args: argparse.Namespace) -> int:
+    summary = _run_mission(args, Path(args.out), "mission", video=not args.no_video)
     print(json.dumps(summary, indent=2))
     return 0
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from iout_mj.missions import run_mission
-
     video = Path(args.out)
     if video.suffix != ".mp4":
         raise ValueError(f"--out {video}: accepted a path ending in .mp4")
-    for name, value in (("width", args.width), ("height", args.height), ("fps", args.fps)):
-        if (value < 16 and name != "fps") or value < 1:
-            raise ValueError(f"--{name} {value}: accepted a positive size (>= 16 px, fps >= 1)")
-    summary = run_mission(
-        policy=args.policy,
-        n_auvs=args.n_auvs,
-        n_nodes=args.nodes,
-        backend=args.backend,
-        seed=args.seed,
-        out=video.parent,
-        width=args.width,
-        height=args.height,
-        fps=args.fps,
-        slots=args.slots,
-        name=video.stem,
-        config=args.config,
-    )
+    summary = _run_mission(args, video.parent, video.stem, video=True)
     print(f"{video} ({summary['video_frames']} frames), {video.with_suffix('.png')}")
     return 0
 
