@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 REPEATS = 3
@@ -74,34 +75,25 @@ def kinematic_rate(n: int, k: int, steps: int = 3000) -> float:
     return _env_rate(_env("kinematic", n, k), steps)
 
 
-class TrivialEnv:
-    """Same spaces as the task, no work: the framework's own ceiling."""
+class TrivialEnv(gym.Env):
+    """Same spaces and episode length as the task, no work: the framework's own ceiling."""
 
-    def __new__(cls, n: int, k: int) -> Any:
-        import gymnasium as gym
+    def __init__(self, n: int, k: int) -> None:
+        ref = _env("kinematic", n, k)
+        self.action_space = ref.action_space
+        self.observation_space = ref.observation_space
+        self._obs = np.zeros(ref.observation_space.shape or (), dtype=np.float32)
+        self._horizon = ref.cfg.scenario.horizon_slots
+        self._t = 0
 
-        class _Trivial(gym.Env):
-            def __init__(self) -> None:
-                ref = _env("kinematic", n, k)
-                self.action_space = ref.action_space
-                self.observation_space = ref.observation_space
-                self._obs = np.zeros(ref.observation_space.shape or (), dtype=np.float32)
-                self._t = 0
+    def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
+        super().reset(seed=seed)
+        self._t = 0
+        return self._obs, {}
 
-            def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
-                super().reset(seed=seed)
-                self._t = 0
-                return self._obs, {}
-
-            def step(self, action: Any) -> Any:
-                self._t += 1
-                return self._obs, 0.0, False, self._t >= 55, {}
-
-        return _Trivial()
-
-
-def _trivial_factory(n: int, k: int) -> Any:
-    return TrivialEnv(n, k)
+    def step(self, action: Any) -> Any:
+        self._t += 1
+        return self._obs, 0.0, False, self._t >= self._horizon, {}
 
 
 def ppo_fps(
@@ -120,7 +112,7 @@ def ppo_fps(
     batch = min(512, n_envs * n_steps)
     cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs, n_steps=n_steps, batch_size=batch)
     fns: list[Any] = [
-        partial(make_env, cfg, backend, i) if backend else partial(_trivial_factory, n, k)
+        partial(make_env, cfg, backend, i) if backend else partial(TrivialEnv, n, k)
         for i in range(n_envs)
     ]
     venv = VecNormalize(SubprocVecEnv(fns, start_method="spawn"))

@@ -56,8 +56,6 @@ class SlotOutcome:
     """(K,) energy each node harvested in this slot."""
     delivered: NDArray[np.bool_]
     """(K,) node k delivered an update."""
-    aoi_reset: NDArray[np.bool_]
-    """(K,) node k's AoI was reset to 1."""
 
 
 class SensorNetwork:
@@ -137,5 +135,4 @@ class SensorNetwork:
             uplink_stored_j=stored[data],
             harvested_j=harvested,
             delivered=delivered,
-            aoi_reset=reset,
         )

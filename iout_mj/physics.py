@@ -121,14 +121,6 @@ class AUVPhysics(engine.Physics):
         v = self.velocities_mps()
         return np.cos(yaw) * v[:, 0] + np.sin(yaw) * v[:, 1]
 
-    def yaw_rate_rps(self) -> FloatArray:
-        return np.array(self.data.qvel[self._vyaw])
-
-    def actuator_forces(self) -> FloatArray:
-        """(N, 2): surge thrust in N and yaw torque in N m."""
-        f = self.data.actuator_force
-        return np.stack([f[self._thrust], f[self._yaw_act]], axis=1)
-
     # ------------------------------------------------------------------ commands
     def set_commands(self, yaw_setpoint_rad: FloatArray, speed_setpoint_mps: FloatArray) -> None:
         """Heading (unwrapped) and speed setpoints for the low-level servos."""
