@@ -92,11 +92,16 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         self.render_mode = render_mode
         self.width, self.height = width, height
         random_layout = layout == "random"
+        # Errors that end an episode instead of propagating (none for the kinematic model).
+        self._divergence: tuple[type[Exception], ...] = ()
         if backend == "mujoco":
+            from dm_control.rl.control import PhysicsError
+
             from iout_mj.task import make_environment
 
             self._env: Any = make_environment(self.cfg, random_layout=random_layout)
             self.mission = self._env.task.mission
+            self._divergence = (PhysicsError,)
         else:
             from iout_mj.kinematic import KinematicEnvironment
 
@@ -130,11 +135,9 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         return self._last_obs.copy(), {"slot": 0}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        from dm_control.rl.control import PhysicsError
-
         try:
             ts = self._env.step(action)
-        except PhysicsError as exc:
+        except self._divergence as exc:
             info: dict[str, Any] = {
                 "error": f"physics diverged: {exc}",
                 "metrics": self.mission.metrics(),
