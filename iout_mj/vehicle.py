@@ -85,7 +85,7 @@ def _add_markers(spec: mujoco.MjSpec, cfg: Config) -> None:
             rgba=[0.2, 0.6, 1, 1],
             contype=0,
             conaffinity=0,
-            fluid_ellipsoid=0,
+            density=0,  # scenery: a massless static body costs no fluid-force work
         )
         body.add_site(name=f"{names.node_name(k)}_antenna", pos=[0, 0, 4.0], size=[0.5, 0, 0])
     dx, dy = sc.dock_center_m
