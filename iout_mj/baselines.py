@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from iout_mj import acoustics
+from iout_mj.geometry import pairwise_distance_m
 from iout_mj.mission import Mission
-from iout_mj.network import pairwise_distance_m
 
 IntArray = NDArray[np.int64]
 NODE_REACHED_M = 60.0

@@ -119,7 +119,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         return getattr(self._env, "physics", None)
 
     def _flatten(self, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return np.concatenate(list(obs.values())).astype(np.float32)
+        return np.concatenate(list(obs.values()), dtype=np.float32)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -141,7 +141,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
             info: dict[str, Any] = {
                 "error": f"physics diverged: {exc}",
                 "metrics": self.mission.metrics(),
-                "slot": self.mission.slot,
+                "slot": int(self.mission.slot),
             }
             return self._last_obs.copy(), 0.0, True, False, info
         obs = self._flatten(ts.observation)
@@ -149,13 +149,14 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
             info = {
                 "error": "non-finite observation (diverged state)",
                 "metrics": self.mission.metrics(),
-                "slot": self.mission.slot,
+                "slot": int(self.mission.slot),
             }
             return self._last_obs.copy(), 0.0, True, False, info
         self._last_obs = obs
         terminated = bool(ts.last() and ts.discount == 0.0)
         truncated = bool(ts.last() and not terminated)
-        info = {"reward_terms": dict(self.mission.terms), "slot": self.mission.slot}
+        terms = {k: float(v) for k, v in self.mission.terms.items()}
+        info = {"reward_terms": terms, "slot": int(self.mission.slot)}
         if ts.last():
             info["metrics"] = self.mission.metrics()
         if self._renderer is not None:

@@ -3,6 +3,8 @@
 Same spaces, mission rules, reward and metrics as the MuJoCo task (`mission.Mission`); the
 vehicles jump to p + v_sp * slot * (cos theta_sp, sin theta_sp) each slot, a move that would
 leave the area is rejected (the AUV stays), and propulsion energy is `energy.slot_energy_j`.
+`move` works on one environment or on a batch; `KinematicEnvironment` is the dm_env of one,
+`iout_mj.vec_env.KinematicVecEnv` steps B of them per call.
 """
 
 from __future__ import annotations
@@ -15,10 +17,28 @@ from dm_env import specs
 
 from iout_mj import energy
 from iout_mj.config import Config
+from iout_mj.geometry import norm_xy, wrap_angle
 from iout_mj.mission import Mission
 
-_PATH_SAMPLES = np.linspace(0.0, 1.0, 6)[1:, None, None]
+PATH_SAMPLES = 5
 """Points along each straight slot move at which separations are checked."""
+
+
+def move(m: Mission, action: Any) -> Any:
+    """One slot of the kinematic model for every environment of `m`; returns the reward."""
+    start = m.positions_m.copy()
+    heading, speed = m.begin_slot(action)
+    end = np.where(m.boundary_attempt[..., None], start, m.straight_end_m)
+    prop = energy.travel_energy_j(speed, norm_xy(end - start), m.cfg.motion)
+    fraction = np.linspace(0.0, 1.0, PATH_SAMPLES + 1)[1:].reshape(-1, *[1] * end.ndim)
+    return m.end_slot(
+        end,
+        wrap_angle(heading),
+        speed.copy(),
+        prop,
+        np.zeros_like(prop),
+        start + fraction * (end - start),
+    )
 
 
 class KinematicEnvironment(dm_env.Environment):
@@ -42,30 +62,15 @@ class KinematicEnvironment(dm_env.Environment):
         if self._reset_next:
             return self.reset()
         m = self.mission
-        start = m.positions_m
-        heading, speed = m.begin_slot(action)
-        slot_s = self.cfg.scenario.slot_s
-        direction = np.stack([np.cos(heading), np.sin(heading)], axis=1)
-        end = start + (speed * slot_s)[:, None] * direction
-        end[m.boundary_attempt] = start[m.boundary_attempt]
-        travelled = np.linalg.norm(end - start, axis=1)
-        prop = energy.travel_energy_j(speed, travelled, self.cfg.motion)
-        m.end_slot(
-            end,
-            np.mod(heading + np.pi, 2 * np.pi) - np.pi,
-            speed,
-            prop,
-            np.zeros(m.n_auvs),
-            start + _PATH_SAMPLES * (end - start),
-        )
+        reward = float(move(m, action))
         obs = m.observation()
         if m.terminated:
             self._reset_next = True
-            return dm_env.termination(m.reward, obs)
+            return dm_env.termination(reward, obs)
         if m.truncated:
             self._reset_next = True
-            return dm_env.truncation(m.reward, obs)
-        return dm_env.transition(m.reward, obs)
+            return dm_env.truncation(reward, obs)
+        return dm_env.transition(reward, obs)
 
     def action_spec(self) -> specs.BoundedArray:
         return self.mission.action_spec()

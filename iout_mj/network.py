@@ -1,5 +1,8 @@
 """Sensor-node state: stored energy, AoI with K_reset, service and delivery counts, Jain (numpy).
 
+Every array may carry leading batch axes: `(*batch, K)` for node state, `(*batch, N, ...)` for
+AUV inputs; `batch` is () for one environment and (B,) for B environments stepped together.
+
 Rules of one slot (paper section III-A), for N AUVs and K nodes, all vectorised:
 
 1. Distances are taken between the AUV positions given to `step` and the nodes.
@@ -16,33 +19,35 @@ Rules of one slot (paper section III-A), for N AUVs and K nodes, all vectorised:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from iout_mj import acoustics
 from iout_mj.config import AcousticsConfig, NetworkConfig
+from iout_mj.geometry import pairwise_distance_m
 
 FloatArray = NDArray[np.float64]
 INITIAL_AOI = 1.0
 
 
-def jain_index(counts: ArrayLike) -> float:
-    """Jain's index (sum o)^2 / (K sum o^2); 0 when nothing was delivered (no service)."""
+def jain_index(counts: ArrayLike) -> Any:
+    """Jain's index (sum o)^2 / (K sum o^2) over the last axis; 0 where nothing was delivered."""
     o = np.asarray(counts, dtype=float)
-    sq = float(np.dot(o, o))
-    return 0.0 if sq == 0 else float(o.sum() ** 2 / (o.size * sq))
+    sq = np.einsum("...k,...k->...", o, o)
+    num = o.sum(axis=-1) ** 2
+    return np.divide(num, o.shape[-1] * sq, out=np.zeros_like(num), where=sq > 0)[()]
 
 
-def pairwise_distance_m(auv_xy: ArrayLike, nodes_xy: ArrayLike) -> FloatArray:
-    """Distances (N, K) between N AUV positions and K node positions."""
-    diff = np.asarray(auv_xy, dtype=float)[:, None, :] - np.asarray(nodes_xy, dtype=float)[None]
-    return np.hypot(diff[..., 0], diff[..., 1])
+def rows(mask: NDArray[np.bool_] | None) -> Any:
+    """Index of the batch rows to (re)set: every row for None, else the rows where `mask`."""
+    return Ellipsis if mask is None else mask
 
 
 @dataclass(frozen=True)
 class SlotOutcome:
-    """What happened in one slot."""
+    """What happened in one slot (leading batch axes omitted below)."""
 
     distance_m: FloatArray
     """(N, K) AUV-node distances used for the link budget."""
@@ -59,42 +64,54 @@ class SlotOutcome:
 
 
 class SensorNetwork:
-    """The K nodes' state and its per-slot update."""
+    """The K nodes' state and its per-slot update, for `batch` independent networks."""
 
-    def __init__(self, nodes_m: ArrayLike, network: NetworkConfig, acoustic: AcousticsConfig):
-        self.nodes_m = np.asarray(nodes_m, dtype=float)
+    def __init__(
+        self,
+        nodes_m: ArrayLike,
+        network: NetworkConfig,
+        acoustic: AcousticsConfig,
+        batch: tuple[int, ...] = (),
+    ):
+        nodes = np.asarray(nodes_m, dtype=float)
+        k = len(nodes)
+        self.batch = batch
+        self.nodes_m = np.broadcast_to(nodes, (*batch, k, 2)).copy()
+        """(*batch, K, 2) node positions (a random layout may differ per environment)."""
         self.cfg = network
         self.acoustic = acoustic
         self.bits_per_delivery = acoustics.bits_per_delivery(acoustic)
         self.link = acoustics.LinkBudget(acoustic)
-        k = len(self.nodes_m)
-        self.energy_j = np.zeros(k)
-        self.aoi = np.zeros(k)
-        self.service_count = np.zeros(k, dtype=np.int64)
-        self.deliveries = np.zeros(k, dtype=np.int64)
+        self._node_index = np.arange(k)
+        self.energy_j = np.zeros((*batch, k))
+        self.aoi = np.zeros((*batch, k))
+        self.service_count = np.zeros((*batch, k), dtype=np.int64)
+        self.deliveries = np.zeros((*batch, k), dtype=np.int64)
         self.reset()
 
     @property
     def n_nodes(self) -> int:
-        return len(self.nodes_m)
+        return len(self._node_index)
 
-    def reset(self) -> None:
-        self.energy_j[:] = self.cfg.node_initial_energy_j
-        self.aoi[:] = INITIAL_AOI
-        self.service_count[:] = 0
-        self.deliveries[:] = 0
-
-    @property
-    def delivered_bits(self) -> float:
-        return float(self.deliveries.sum()) * self.bits_per_delivery
+    def reset(self, mask: NDArray[np.bool_] | None = None) -> None:
+        """Fresh nodes in every environment (mask None) or in those where `mask` is True."""
+        i = rows(mask)
+        self.energy_j[i] = self.cfg.node_initial_energy_j
+        self.aoi[i] = INITIAL_AOI
+        self.service_count[i] = 0
+        self.deliveries[i] = 0
 
     @property
-    def jain(self) -> float:
+    def delivered_bits(self) -> Any:
+        return self.deliveries.sum(axis=-1) * self.bits_per_delivery
+
+    @property
+    def jain(self) -> Any:
         return jain_index(self.deliveries)
 
     @property
-    def mean_aoi(self) -> float:
-        return float(self.aoi.mean())
+    def mean_aoi(self) -> Any:
+        return self.aoi.mean(axis=-1)
 
     def step(
         self, auv_xy: ArrayLike, wet_nodes: ArrayLike, data_nodes: ArrayLike, active: ArrayLike
@@ -102,25 +119,21 @@ class SensorNetwork:
         """Advance one slot.
 
         Args:
-            auv_xy: (N, 2) AUV positions in metres.
-            wet_nodes: (N,) node index each AUV charges.
-            data_nodes: (N,) node index each AUV collects from.
-            active: (N,) bool; inactive (docked) AUVs neither charge nor collect.
+            auv_xy: (*batch, N, 2) AUV positions in metres.
+            wet_nodes: (*batch, N) node index each AUV charges.
+            data_nodes: (*batch, N) node index each AUV collects from.
+            active: (*batch, N) bool; inactive (docked) AUVs neither charge nor collect.
         """
-        k = self.n_nodes
-        wet = np.asarray(wet_nodes, dtype=np.int64)
-        data = np.asarray(data_nodes, dtype=np.int64)
-        act = np.asarray(active, dtype=bool)
-        n_idx = np.arange(len(data))
+        act = np.asarray(active, dtype=bool)[..., None]
         d = pairwise_distance_m(auv_xy, self.nodes_m)
         harvest_all, req_all = self.link.energies_j(d)
 
-        named = (np.arange(k)[None, :] == data[:, None]) & act[:, None]
-        req_node = np.where(named, req_all, np.inf).min(axis=0)
+        picked = self._node_index == np.asarray(data_nodes)[..., None]  # (*batch, N, K)
+        req_node = np.where(picked & act, req_all, np.inf).min(axis=-2)  # inf: not named
         stored = self.energy_j.copy()
-        delivered = np.isfinite(req_node) & (stored >= req_node)
-        charged = (np.arange(k)[None, :] == wet[:, None]) & act[:, None]
-        harvested = np.where(charged, harvest_all, 0.0).sum(axis=0)
+        delivered = stored >= req_node
+        charged = (self._node_index == np.asarray(wet_nodes)[..., None]) & act
+        harvested = np.where(charged, harvest_all, 0.0).sum(axis=-2)
 
         self.energy_j += harvested - np.where(delivered, req_node, 0.0)
         self.deliveries += delivered
@@ -130,9 +143,9 @@ class SensorNetwork:
         self.service_count[reset] = 0
         return SlotOutcome(
             distance_m=d,
-            uplink_ok=delivered[data] & act,
-            uplink_req_j=req_all[n_idx, data],
-            uplink_stored_j=stored[data],
+            uplink_ok=(picked & delivered[..., None, :]).any(axis=-1) & act[..., 0],
+            uplink_req_j=np.where(picked, req_all, 0.0).sum(axis=-1),
+            uplink_stored_j=np.where(picked, stored[..., None, :], 0.0).sum(axis=-1),
             harvested_j=harvested,
             delivered=delivered,
         )

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from iout_mj import names, vehicle
 from iout_mj.config import Config
+from iout_mj.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -178,8 +179,3 @@ class AUVPhysics(engine.Physics):
             self._rollout.close()
             self._rollout = None
         super().free()
-
-
-def wrap_angle(angle_rad: Any) -> Any:
-    """Wrap angles to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(angle_rad), 2 * np.pi)

@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 from PIL import Image, ImageDraw, ImageFont
 
 from iout_mj import names, vehicle
-from iout_mj.physics import joint_addresses, wrap_angle
+from iout_mj.geometry import wrap_angle
+from iout_mj.physics import joint_addresses
 
 AUV_COLORS = np.array(
     [[1.0, 0.85, 0.1, 1], [1.0, 0.3, 0.8, 1], [0.3, 1.0, 0.4, 1], [1.0, 0.5, 0.1, 1]]

@@ -57,7 +57,7 @@ class DataCollectionTask(base.Task):
         return self.mission.observation()
 
     def get_reward(self, physics: AUVPhysics) -> float:
-        return self.mission.reward
+        return float(self.mission.reward)
 
     def get_termination(self, physics: AUVPhysics) -> float | None:
         if self.mission.terminated:

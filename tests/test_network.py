@@ -105,3 +105,29 @@ def test_delivered_bits():
 )
 def test_jain(counts, expected):
     assert jain_index(counts) == pytest.approx(expected)
+
+
+def test_jain_over_a_batch_of_rows():
+    rows = np.array([[1, 1, 1], [3, 0, 0], [0, 0, 0]])
+    np.testing.assert_allclose(jain_index(rows), [1.0, 1 / 3, 0.0])
+
+
+def test_batched_network_steps_each_row_like_a_single_network():
+    single = [make(), make()]
+    batch = SensorNetwork(
+        NODES,
+        NetworkConfig(k_reset=3, aoi_max=50.0, node_initial_energy_j=0.1),
+        AcousticsConfig(),
+        batch=(2,),
+    )
+    xy = np.array([[[100.0, 150.0]], [[880.0, 900.0]]])  # row 0 near node 0, row 1 near node 1
+    for t in range(5):
+        data, wet = np.array([[0], [t % 2]]), np.array([[1], [1]])
+        out = batch.step(xy, wet, data, np.ones((2, 1), dtype=bool))
+        for r, net in enumerate(single):
+            o = net.step(xy[r], wet[r], data[r], [True])
+            np.testing.assert_allclose(out.uplink_req_j[r], o.uplink_req_j)
+            np.testing.assert_array_equal(out.uplink_ok[r], o.uplink_ok)
+            np.testing.assert_allclose(batch.energy_j[r], net.energy_j)
+            np.testing.assert_array_equal(batch.aoi[r], net.aoi)
+    assert batch.deliveries.sum() > 0

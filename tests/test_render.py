@@ -80,11 +80,33 @@ def test_missing_gl_library_gives_the_documented_message():
 def test_render_command(tmp_path):
     clip = tmp_path / "clip.mp4"
     out = subprocess.run(
-        [sys.executable, "-m", "iout_mj.cli", "render", "--policy", "greedy", "--slots", "2",
-         "--width", "320", "--height", "180", "--fps", "10", "--out", str(clip)],
-        capture_output=True, text=True, check=True)
+        [
+            sys.executable,
+            "-m",
+            "iout_mj.cli",
+            "render",
+            "--policy",
+            "greedy",
+            "--slots",
+            "2",
+            "--width",
+            "320",
+            "--height",
+            "180",
+            "--fps",
+            "10",
+            "--out",
+            str(clip),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     assert "16 frames" in out.stdout
     assert clip.stat().st_size > 1000 and clip.with_suffix(".png").exists()
-    bad = subprocess.run([sys.executable, "-m", "iout_mj.cli", "render", "--out",
-                          str(tmp_path / "clip.gif")], capture_output=True, text=True)
+    bad = subprocess.run(
+        [sys.executable, "-m", "iout_mj.cli", "render", "--out", str(tmp_path / "clip.gif")],
+        capture_output=True,
+        text=True,
+    )
     assert bad.returncode == 2 and "accepted a path ending in .mp4" in bad.stderr

@@ -6,7 +6,8 @@ import pytest
 
 from iout_mj import energy, names, vehicle
 from iout_mj.config import make_config
-from iout_mj.physics import AUVPhysics, wrap_angle
+from iout_mj.geometry import wrap_angle
+from iout_mj.physics import AUVPhysics
 from iout_mj.validation import maneuvers, steady_state, timestep_change
 
 CFG1 = make_config(1, 7)

@@ -1,0 +1,125 @@
+"""The batched kinematic backend: one Mission over B environments, served as an SB3 VecEnv."""
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+from iout_mj.envs import ENV_ID
+from iout_mj.kinematic import move
+from iout_mj.mission import ActionError, Mission
+from iout_mj.vec_env import KinematicVecEnv
+
+
+def docked_start(cfg):
+    """No start jitter and both AUVs starting 100 m west of the dock centre (radius 70 m),
+    heading east: every reset is the same, and AUVs that fly straight on at 1.4 m/s dock
+    after one slot (so that episodes end at different steps)."""
+    sc = dataclasses.replace(
+        cfg.scenario,
+        start_jitter_m=0.0,
+        start_heading_jitter_deg=0.0,
+        starts_m=((730.0, 830.0), (730.0, 835.0)),
+    )
+    return cfg.replace(scenario=sc)
+
+
+def test_batch_matches_independent_environments(cfg, rng):
+    cfg = docked_start(cfg)
+    b = 4
+    venv = KinematicVecEnv(b, config=cfg, seed=0)
+    singles = [gym.make(ENV_ID, backend="kinematic", config=cfg) for _ in range(b)]
+    obs = venv.reset()
+    for e, env in enumerate(singles):
+        np.testing.assert_array_equal(obs[e], env.reset(seed=e)[0])
+    ends = np.zeros(b, dtype=int)
+    for _ in range(120):
+        actions = rng.integers(0, venv.action_space.nvec, size=(b, venv.action_space.shape[0]))
+        actions[0, 0::4] = 5  # env 0 flies straight on (dtheta 0) ...
+        actions[0, 1::4] = 6  # ... speeding up to 1.4 m/s: it docks after one slot
+        obs, rewards, dones, infos = venv.step(actions)
+        for e, env in enumerate(singles):
+            o, r, term, trunc, info = env.step(actions[e])
+            assert rewards[e] == pytest.approx(r, rel=1e-6, abs=1e-6)
+            assert dones[e] == (term or trunc)
+            if dones[e]:
+                ends[e] += 1
+                np.testing.assert_allclose(infos[e]["terminal_observation"], o, atol=1e-6)
+                assert infos[e]["TimeLimit.truncated"] == trunc
+                for key, value in info["metrics"].items():
+                    assert infos[e]["metrics"][key] == pytest.approx(value), key
+                o, _ = env.reset()
+            np.testing.assert_allclose(obs[e], o, atol=1e-6)
+    assert ends[0] == 120  # one-slot episodes
+    assert ends[1:].min() > 0 and ends[1:].max() < 120  # others end at the horizon or docked
+
+
+def test_partial_reset_only_touches_masked_rows(cfg):
+    m = Mission(cfg, n_envs=4)
+    rng = np.random.RandomState(0)
+    m.reset(rng)
+    for _ in range(3):
+        move(m, np.tile(m.action_high // 2, (4, 1)))
+    before = m.observation()
+    mask = np.array([True, False, True, False])
+    m.reset(rng, mask)
+    after = m.observation()
+    for name in before:
+        np.testing.assert_array_equal(after[name][~mask], before[name][~mask])
+    assert m.slot.tolist() == [0, 3, 0, 3]
+    assert not np.array_equal(m.positions_m[0], m.positions_m[2])  # one draw per row
+
+
+def test_seeding_reproduces_the_batch(cfg, rng):
+    a, b = KinematicVecEnv(3, config=cfg, seed=7), KinematicVecEnv(3, config=cfg)
+    b.seed(7)
+    np.testing.assert_array_equal(a.reset(), b.reset())
+    for _ in range(60):
+        act = rng.integers(0, a.action_space.nvec, size=(3, a.action_space.shape[0]))
+        oa, ra, done_a, _ = a.step(act)
+        ob, rb, done_b, _ = b.step(act)
+        np.testing.assert_array_equal(oa, ob)
+        np.testing.assert_array_equal(ra, rb)
+        np.testing.assert_array_equal(done_a, done_b)
+
+
+def test_bad_batched_actions_name_env_auv_and_range(cfg):
+    venv = KinematicVecEnv(3, config=cfg)
+    venv.reset()
+    good = np.zeros((3, 8), dtype=np.int64)
+    with pytest.raises(ActionError, match=r"shape \(8,\); accepted 3 rows"):
+        venv.step(good[0])
+    bad = good.copy()
+    bad[2, 6] = 7  # env 2, AUV 1, aet_node; K = 7
+    with pytest.raises(ActionError, match=r"env 2, AUV 1: aet_node index 7 .* accepted 0 to 6"):
+        venv.step(bad)
+    with pytest.raises(ValueError, match="n_envs=0"):
+        KinematicVecEnv(0, config=cfg)
+
+
+def test_ppo_trains_on_the_vec_env(cfg):
+    venv = VecNormalize(VecMonitor(KinematicVecEnv(4, config=cfg, seed=0)))
+    model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, device="cpu", seed=0)
+    model.learn(4 * 32 * 2)
+    assert model.num_timesteps == 256
+    assert len(model.ep_info_buffer) > 0  # 55-slot episodes finished and were monitored
+
+
+def test_aoi_booked_after_an_early_end_matches_slot_by_slot_ageing(cfg):
+    m = Mission(cfg, n_envs=3)
+    m.reset(np.random.RandomState(0))
+    a_max = cfg.network.aoi_max
+    m.network.aoi[:] = np.array([[1, 5, a_max - 2, a_max, 3, 9, 30]] * 3)
+    m.slot[:] = [0, 40, 54]
+    expected = []
+    for e in range(3):
+        ages = m.network.aoi[e].copy()
+        total = 0.0
+        for _ in range(cfg.scenario.horizon_slots - m.slot[e]):
+            ages = np.minimum(ages + 1, a_max)
+            total += ages.mean()
+        expected.append(total)
+    np.testing.assert_allclose(m._unserved_aoi_sum(), expected)
