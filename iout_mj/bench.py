@@ -32,14 +32,19 @@ def _env(backend: str, n: int, k: int, **kw: Any) -> Any:
     return MultiAUVEnv(backend=backend, config=scenario_config(n, k), **kw)
 
 
-def _env_rate(env: Any, steps: int) -> float:
+def _random_actions(space: Any, count: int = 64, batch: tuple[int, ...] = ()) -> list[Any]:
     rng = np.random.default_rng(0)
-    actions = [rng.integers(0, env.action_space.nvec) for _ in range(64)]
-    env.reset(seed=0)
+    return [rng.integers(0, space.nvec, size=(*batch, len(space.nvec))) for _ in range(count)]
+
+
+def _env_rate(env: Any, steps: int) -> float:
+    """Env steps/s with random valid actions; every repeat replays the same episodes."""
+    actions = _random_actions(env.action_space)
 
     def run() -> int:
+        env.reset(seed=0)
         for i in range(steps):
-            _, _, term, trunc, _ = env.step(actions[i % 64])
+            _, _, term, trunc, _ = env.step(actions[i % len(actions)])
             if term or trunc:
                 env.reset()
         return steps
@@ -49,20 +54,31 @@ def _env_rate(env: Any, steps: int) -> float:
 
 
 def slot_vs_raw(n: int, k: int, slots: int = 40) -> dict[str, float]:
-    """Env steps/s of the MuJoCo backend over plain mj_step(nstep) on the same model."""
+    """Env steps/s of the MuJoCo backend over plain mj_step(nstep) on the same model, from
+    the same states with the same controls (so both do the same physics work)."""
     import mujoco
 
     env = _env("mujoco", n, k)
     physics = env.physics
-    m, nstep = physics.model.ptr, env._env._n_sub_steps
+    m, d, nstep = physics.model.ptr, physics.data.ptr, env._env._n_sub_steps
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    starts, ctrls = np.empty((slots, mujoco.mj_stateSize(m, spec))), np.empty((slots, m.nu))
+    actions = _random_actions(env.action_space)
+    env.reset(seed=0)
+    for i in range(slots):  # record every slot's start state and control (same as _env_rate)
+        mujoco.mj_getState(m, d, starts[i], spec)
+        _, _, term, trunc, _ = env.step(actions[i % len(actions)])
+        ctrls[i] = d.ctrl
+        if term or trunc:
+            env.reset()
     env_rate = _env_rate(env, slots)
-    d = mujoco.MjData(m)
-    d.qpos[:] = physics.data.qpos
-    d.ctrl[:] = physics.data.ctrl
+    raw_data = mujoco.MjData(m)
 
     def raw() -> int:
-        for _ in range(slots):
-            mujoco.mj_step(m, d, nstep)
+        for i in range(slots):
+            mujoco.mj_setState(m, raw_data, starts[i], spec)
+            raw_data.ctrl[:] = ctrls[i]
+            mujoco.mj_step(m, raw_data, nstep)
         return slots
 
     raw()
@@ -71,8 +87,29 @@ def slot_vs_raw(n: int, k: int, slots: int = 40) -> dict[str, float]:
     return {"env_steps_per_s": env_rate, "raw_slots_per_s": raw_rate, "ratio": env_rate / raw_rate}
 
 
-def kinematic_rate(n: int, k: int, steps: int = 3000) -> float:
-    return _env_rate(_env("kinematic", n, k), steps)
+KINEMATIC_BATCH = 64
+"""Environments per KinematicVecEnv call in the kinematic benchmark (and about what PPO uses)."""
+
+
+def kinematic_rate(n: int, k: int, steps: int = 3000) -> dict[str, float]:
+    """Kinematic env steps/s on one core: one env through the gymnasium API, and a batch of
+    `KINEMATIC_BATCH` envs through `KinematicVecEnv` (the backend PPO trains on)."""
+    from iout_mj.evaluation import scenario_config
+    from iout_mj.vec_env import KinematicVecEnv
+
+    single = _env_rate(_env("kinematic", n, k), steps)
+    venv = KinematicVecEnv(KINEMATIC_BATCH, config=scenario_config(n, k), seed=0)
+    actions = _random_actions(venv.action_space, 16, (KINEMATIC_BATCH,))
+    calls = max(steps // KINEMATIC_BATCH, 20)
+
+    def run() -> int:
+        venv.reset()
+        for i in range(calls):
+            venv.step(actions[i % len(actions)])
+        return calls * KINEMATIC_BATCH
+
+    run()
+    return {"single_env": single, f"batch_{KINEMATIC_BATCH}": _median_rate(run)}
 
 
 class TrivialEnv(gym.Env):
@@ -96,41 +133,31 @@ class TrivialEnv(gym.Env):
         return self._obs, 0.0, False, self._t >= self._horizon, {}
 
 
-def ppo_fps(
-    backend: str | None, n: int, k: int, n_envs: int, n_steps: int, rollouts: int = 2
-) -> float:
-    """PPO steps/s (collection + updates) with SubprocVecEnv workers; None = trivial env."""
+def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2) -> float:
+    """PPO steps/s (collection + updates) with the training configuration's hyperparameters
+    and vectorisation (`training.vec_env`: MuJoCo in worker processes, the kinematic batch in
+    this one); None = `TrivialEnv` in as many worker processes."""
     from functools import partial
 
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    from iout_mj.training import TrainConfig, make_env
+    from iout_mj.training import TrainConfig, new_model, vec_env
 
-    torch.set_num_threads(1)
-    batch = min(512, n_envs * n_steps)
-    cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs, n_steps=n_steps, batch_size=batch)
-    fns: list[Any] = [
-        partial(make_env, cfg, backend, i) if backend else partial(TrivialEnv, n, k)
-        for i in range(n_envs)
-    ]
-    venv = VecNormalize(SubprocVecEnv(fns, start_method="spawn"))
-    model = PPO(
-        "MlpPolicy",
-        venv,
-        n_steps=n_steps,
-        batch_size=batch,
-        n_epochs=10,
-        device="cpu",
-        policy_kwargs={"net_arch": [256, 256]},
-        verbose=0,
-        seed=0,
-    )
-    model.learn(n_envs * n_steps)  # warm up (worker start, first update)
+    cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs)
+    torch.set_num_threads(cfg.torch_threads)
+    if backend is None:
+        fns: list[Any] = [partial(TrivialEnv, n, k)] * n_envs
+        inner = SubprocVecEnv(fns, start_method="spawn")
+    else:
+        inner = vec_env(cfg, backend, n_envs, cfg.seed, subproc=True)
+    venv = VecNormalize(inner, gamma=cfg.gamma)
+    model = new_model(cfg, venv)
+    rollout = n_envs * cfg.n_steps
+    model.learn(rollout)  # warm up (worker start, first update)
     t = time.perf_counter()
-    model.learn(rollouts * n_envs * n_steps, reset_num_timesteps=False)
-    fps = rollouts * n_envs * n_steps / (time.perf_counter() - t)
+    model.learn(rollouts * rollout, reset_num_timesteps=False)
+    fps = rollouts * rollout / (time.perf_counter() - t)
     venv.close()
     return fps
 
@@ -257,15 +284,21 @@ def run_all(quick: bool = False) -> dict[str, Any]:
         "substeps_per_slot": round(cfg.scenario.slot_s / cfg.physics.timestep_s),
     }
     result["slot_vs_raw"] = {f"N{n}_K{k}": slot_vs_raw(n, k, 10 if quick else 40) for n, k in sizes}
-    result["kinematic_steps_per_s"] = {
+    kin = {
         f"N{n}_K{k}": kinematic_rate(n, k, 300 if quick else 3000)
         for n, k in ([(2, 13)] if quick else [(1, 7), (1, 13), (2, 7), (2, 13), (4, 7), (4, 13)])
     }
-    n_envs, n_steps = (2, 64) if quick else (8, 512)
-    physics_fps = ppo_fps("mujoco", 2, 7, n_envs, n_steps, rollouts=1 if quick else 2)
-    trivial_fps = ppo_fps(None, 2, 7, n_envs, n_steps, rollouts=1 if quick else 2)
-    result["ppo_fps"] = {"physics": physics_fps, "trivial": trivial_fps}
-    result["ppo_fps_ratio"] = physics_fps / trivial_fps
+    result["kinematic_steps_per_s"] = {key: v[f"batch_{KINEMATIC_BATCH}"] for key, v in kin.items()}
+    result["kinematic_single_env_steps_per_s"] = {key: v["single_env"] for key, v in kin.items()}
+    result["kinematic_batch"] = KINEMATIC_BATCH
+    n_envs, rollouts = (2, 1) if quick else (8, 2)
+    fps = {b: ppo_fps(b, 2, 7, n_envs, rollouts) for b in ("mujoco", "kinematic", None)}
+    result["ppo_fps"] = {
+        "physics": fps["mujoco"],
+        "kinematic": fps["kinematic"],
+        "trivial": fps[None],
+    }
+    result["ppo_fps_ratio"] = fps["mujoco"] / fps[None]
     steps = 10 if quick else 60
     one, two = _worker_rate(1, 2, 7, steps), _worker_rate(2, 2, 7, steps)
     result["subproc_scaling"] = two / one
@@ -286,12 +319,16 @@ def format_table(r: dict[str, Any]) -> str:
             f"  {key:<7} env {v['env_steps_per_s']:8.1f} /s   raw "
             f"{v['raw_slots_per_s']:8.1f} /s   ratio {v['ratio']:.3f}"
         )
-    lines.append("kinematic_steps_per_s (one core; target >= 15000 for N2_K13)")
-    for key, v in r["kinematic_steps_per_s"].items():
-        lines.append(f"  {key:<7} {v:10.0f}")
     lines.append(
-        f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {r['ppo_fps']['physics']:.0f}"
-        f" / trivial {r['ppo_fps']['trivial']:.0f} steps/s; target >= 0.6)"
+        f"kinematic_steps_per_s (one core, KinematicVecEnv of {r['kinematic_batch']} envs; "
+        "target >= 15000 for N2_K13) [one env through gymnasium]"
+    )
+    for key, v in r["kinematic_steps_per_s"].items():
+        lines.append(f"  {key:<7} {v:10.0f}   [{r['kinematic_single_env_steps_per_s'][key]:7.0f}]")
+    p = r["ppo_fps"]
+    lines.append(
+        f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {p['physics']:.0f} / trivial "
+        f"{p['trivial']:.0f} steps/s; target >= 0.6); kinematic batch {p['kinematic']:.0f} steps/s"
     )
     lines.append(f"subproc_scaling {r['subproc_scaling']:.3f} (2 workers / 1; target >= 1.8)")
     lines.append(f"render_fps {r['render_fps']:.1f} (640x480, top-down + chase, overlays)")

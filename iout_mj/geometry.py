@@ -15,9 +15,12 @@ def norm_xy(v: FloatArray) -> FloatArray:
     return np.hypot(v[..., 0], v[..., 1])
 
 
+_QUARTER_TURN = np.array([0.0, np.pi / 2])
+
+
 def unit_xy(angle_rad: FloatArray) -> FloatArray:
-    """(cos, sin) of angles, along a new last axis."""
-    return np.stack([np.cos(angle_rad), np.sin(angle_rad)], axis=-1)
+    """(cos, sin) of angles, along a new last axis (sin a = cos(a - pi/2): one call)."""
+    return np.cos(np.asarray(angle_rad)[..., None] - _QUARTER_TURN)
 
 
 def wrap_angle(angle_rad: Any) -> Any:

@@ -109,6 +109,7 @@ class Mission:
         self._inv_area = 1.0 / self.area_m
         self._inv_diag = 1.0 / float(np.hypot(*self.area_m))
         self._zero = np.zeros(b)
+        self._v_max_mps = m.v_max_mps
         # Per AUV (*batch, N) and per environment (*batch,) state, reset by `reset`.
         self.positions_m = np.zeros((*b, n, 2))
         self.straight_end_m = np.zeros((*b, n, 2))
@@ -136,6 +137,10 @@ class Mission:
         self.collisions = np.zeros(b, dtype=np.int64)
         self.all_docked_paid = np.zeros(b, dtype=bool)
         self.reward = np.zeros(b)
+        self.terminated = np.zeros(b, dtype=bool)
+        """All docked, or a battery is empty (set by `end_slot`)."""
+        self.truncated = np.zeros(b, dtype=bool)
+        """T_max reached without termination (set by `end_slot`)."""
         self.terms: dict[str, Any] = dict.fromkeys(REWARD_TERMS, self._zero)
         self.outcome: Any = None
         self.log = MissionLog()
@@ -191,13 +196,15 @@ class Mission:
         self.min_separation_m[i] = np.inf
         self.collisions[i] = 0
         self.all_docked_paid[i] = False
+        self.terminated[i] = False
+        self.truncated[i] = False
         if mask is None:  # a partial reset keeps the last step's reward for the finished rows
             self.reward[...] = 0.0
             self.terms = dict.fromkeys(REWARD_TERMS, self._zero)
             self.outcome = None
         if not self.batch:
             self.log = MissionLog()
-            self._log_slot()
+            self._log_slot(self.network.mean_aoi, self.network.jain)
         return self.positions_m, self.headings_rad, self.speeds_mps
 
     # ------------------------------------------------------------------ actions
@@ -251,7 +258,7 @@ class Mission:
         self.heading_sp += np.where(moving, self.dtheta_rad[a[..., 0]], 0.0)
         self.speed_sp[...] = np.where(
             moving,
-            np.clip(self.speed_sp + self.dv_mps[a[..., 1]], 0.0, self.cfg.motion.v_max_mps),
+            np.minimum(np.maximum(self.speed_sp + self.dv_mps[a[..., 1]], 0.0), self._v_max_mps),
             0.0,
         )
         step_m = (self.speed_sp * self.cfg.scenario.slot_s)[..., None] * unit_xy(self.heading_sp)
@@ -321,11 +328,15 @@ class Mission:
         slack = self._deadline_slack_m(dock_dist, self.slot)
         t["deadline"] = w.deadline_per_m * (self.deadline_slack_m - slack).sum(axis=-1)
         self.deadline_slack_m[...] = slack
-        ending = self.terminated | (self.slot >= sc.horizon_slots)
+        self.terminated[...] = all_docked | (self.battery_j <= 0).any(axis=-1)
+        self.truncated[...] = (self.slot >= sc.horizon_slots) & ~self.terminated
+        ending = self.terminated | self.truncated
         t["undocked_at_end"] = np.where(ending, -w.undocked_at_end * (~self.docked).sum(-1), 0.0)
         # Ending early does not stop the nodes' data from ageing: the AoI term of the slots
         # left until T_max, with no more service, is booked now (0 when the horizon is reached).
-        self.aoi_after_mission[...] = np.where(ending, self._unserved_aoi_sum(), 0.0)
+        self.aoi_after_mission[...] = (
+            np.where(ending, self._unserved_aoi_sum(), 0.0) if ending.any() else 0.0
+        )
         t["aoi_after_mission"] = -w.aoi * self.aoi_after_mission
         self.terms = t
         self.reward[...] = sum(t.values())
@@ -340,7 +351,7 @@ class Mission:
             np.minimum(self.min_separation_m, gap.min(axis=-1), out=self.min_separation_m)
             self.collisions += (gap < COLLISION_DISTANCE_M).sum(axis=-1)
         if not self.batch:
-            self._log_slot()
+            self._log_slot(mean_aoi, jain)
         return self.reward[()]
 
     def _unserved_aoi_sum(self) -> FloatArray:
@@ -373,29 +384,19 @@ class Mission:
         pen = np.where(self.docked[..., iu] & self.docked[..., ju], 0.0, pen)
         return -w.collision * pen.sum(axis=-1)
 
-    def _log_slot(self) -> None:
+    def _log_slot(self, mean_aoi: float, jain: float) -> None:
         log = self.log
         log.positions_m.append(self.positions_m.copy())
         log.headings_rad.append(self.headings_rad.copy())
         log.speeds_mps.append(self.speeds_mps.copy())
-        log.mean_aoi.append(float(self.network.mean_aoi))
-        log.jain.append(float(self.network.jain))
+        log.mean_aoi.append(float(mean_aoi))
+        log.jain.append(float(jain))
         if self.outcome is not None:
             log.aet_nodes.append(self.action[:, 2].copy())
             log.uplink_nodes.append(self.action[:, 3].copy())
             log.uplink_ok.append(self.outcome.uplink_ok.copy())
 
     # ------------------------------------------------------------------ episode end
-    @property
-    def terminated(self) -> Any:
-        """All docked, or a battery is empty (per environment)."""
-        return self.docked.all(axis=-1) | (self.battery_j <= 0).any(axis=-1)
-
-    @property
-    def truncated(self) -> Any:
-        """T_max reached without termination (per environment)."""
-        return (self.slot >= self.cfg.scenario.horizon_slots) & ~self.terminated
-
     def metrics(self, env: int | None = None) -> dict[str, Any]:
         """Episode metrics of one environment (`env` indexes the batch; time averages over the
         slots played so far)."""

@@ -34,10 +34,9 @@ INITIAL_AOI = 1.0
 
 def jain_index(counts: ArrayLike) -> Any:
     """Jain's index (sum o)^2 / (K sum o^2) over the last axis; 0 where nothing was delivered."""
-    o = np.asarray(counts, dtype=float)
-    sq = np.einsum("...k,...k->...", o, o)
-    num = o.sum(axis=-1) ** 2
-    return np.divide(num, o.shape[-1] * sq, out=np.zeros_like(num), where=sq > 0)[()]
+    o = np.asarray(counts)
+    sq = (o * o).sum(axis=-1)
+    return (np.square(o.sum(axis=-1)) / (o.shape[-1] * sq + (sq == 0)))[()]  # 0 / 1 if none
 
 
 def rows(mask: NDArray[np.bool_] | None) -> Any:
@@ -111,7 +110,7 @@ class SensorNetwork:
 
     @property
     def mean_aoi(self) -> Any:
-        return self.aoi.mean(axis=-1)
+        return self.aoi.sum(axis=-1) / self.n_nodes
 
     def step(
         self, auv_xy: ArrayLike, wet_nodes: ArrayLike, data_nodes: ArrayLike, active: ArrayLike

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from iout_mj import names, vehicle
 from iout_mj.config import Config
-from iout_mj.geometry import wrap_angle
+from iout_mj.geometry import norm_xy, wrap_angle
 
 FloatArray = NDArray[np.float64]
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -60,6 +60,8 @@ class AUVPhysics(engine.Physics):
 
         self._qx, self._qy, self._qyaw = joint_addresses(m, n)
         self._vx, self._vy, self._vyaw = joint_addresses(m, n, "jnt_dofadr")
+        self._qxy = np.stack([self._qx, self._qy], axis=1)  # (N, 2): one gather per read
+        self._vxy = np.stack([self._vx, self._vy], axis=1)
         self._thrust = np.array(
             [m.actuator(names.auv_prefix(i) + names.THRUST).id for i in range(n)]
         )
@@ -92,12 +94,11 @@ class AUVPhysics(engine.Physics):
 
     # ------------------------------------------------------------------ accessors
     def positions_m(self) -> FloatArray:
-        q = self.data.qpos
-        return np.stack([q[self._qx], q[self._qy]], axis=1)
+        return self.data.ptr.qpos[self._qxy]
 
     def yaw_rad(self) -> FloatArray:
         """Unwrapped yaw angles (continuous across +-pi)."""
-        return np.array(self.data.qpos[self._qyaw])
+        return self.data.ptr.qpos[self._qyaw]
 
     def headings_rad(self) -> FloatArray:
         """Headings wrapped to (-pi, pi]."""
@@ -105,16 +106,14 @@ class AUVPhysics(engine.Physics):
 
     def substep_positions_m(self) -> FloatArray:
         """(substeps, N, 2) positions after every substep of the last `step` call."""
-        q = self.substep_qpos
-        return np.stack([q[:, self._qx], q[:, self._qy]], axis=2)
+        return self.substep_qpos[:, self._qxy]
 
     def velocities_mps(self) -> FloatArray:
-        v = self.data.qvel
-        return np.stack([v[self._vx], v[self._vy]], axis=1)
+        return self.data.ptr.qvel[self._vxy]
 
     def speeds_mps(self) -> FloatArray:
         """Measured speed over ground."""
-        return np.linalg.norm(self.velocities_mps(), axis=1)
+        return norm_xy(self.velocities_mps())
 
     def surge_mps(self) -> FloatArray:
         """Measured speed along the hull axis."""

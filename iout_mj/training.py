@@ -40,7 +40,8 @@ class PhaseConfig:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Hyperparameters (rl-zoo style), keyed by scenario."""
+    """Hyperparameters (rl-zoo style), keyed by scenario; the defaults are those of the
+    shipped configs in training/configs."""
 
     name: str = "ppo"
     n_auvs: int = 2
@@ -48,8 +49,8 @@ class TrainConfig:
     layout: str = "paper"
     phases: tuple[PhaseConfig, ...] = (PhaseConfig(),)
     n_envs: int = 8
-    n_steps: int = 256
-    batch_size: int = 256
+    n_steps: int = 512
+    batch_size: int = 512
     n_epochs: int = 10
     learning_rate: float = 3e-4
     learning_rate_final: float = 3e-5
@@ -121,11 +122,17 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
     return Monitor(env)
 
 
-def _vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, subproc: bool) -> Any:
+def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, subproc: bool) -> Any:
+    """The kinematic backend as one batched VecEnv in this process; the MuJoCo backend as
+    one env per worker process (SubprocVecEnv) when `subproc`."""
     from functools import partial
 
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
 
+    if backend == "kinematic":
+        from iout_mj.vec_env import KinematicVecEnv
+
+        return VecMonitor(KinematicVecEnv(n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout, seed=seed))
     fns: list[Any] = [partial(make_env, cfg, backend, seed + i) for i in range(n_envs)]
     if subproc and n_envs > 1:
         return SubprocVecEnv(fns, start_method="spawn")
@@ -205,6 +212,29 @@ def _score(metrics: dict[str, float]) -> float:
     return -metrics["mean_aoi_horizon"] - 100.0 * max(0.0, 0.95 - metrics["docked"])
 
 
+def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> Any:
+    """A fresh PPO with the config's hyperparameters on `venv`."""
+    from stable_baselines3 import PPO
+
+    return PPO(
+        "MlpPolicy",
+        venv,
+        learning_rate=_lr_schedule(cfg),
+        n_steps=cfg.n_steps,
+        batch_size=cfg.batch_size,
+        n_epochs=cfg.n_epochs,
+        gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_range,
+        ent_coef=cfg.ent_coef,
+        seed=cfg.seed,
+        device="cpu",
+        verbose=0,
+        policy_kwargs={"net_arch": list(cfg.net_arch)},
+        tensorboard_log=None if tensorboard is None else str(tensorboard),
+    )
+
+
 def train(
     cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = True, subproc: bool = True
 ) -> RunState:
@@ -251,6 +281,10 @@ def train(
             self.n0 = state.num_timesteps
 
         def _on_step(self) -> bool:
+            batch = getattr(self.training_env.unwrapped, "mission", None)  # KinematicVecEnv
+            if batch is not None:
+                for k, v in batch.terms.items():
+                    self.logger.record_mean(f"reward/{k}", float(np.mean(v)))
             for info in self.locals["infos"]:
                 for k, v in info.get("reward_terms", {}).items():
                     self.logger.record_mean(f"reward/{k}", v)
@@ -299,7 +333,7 @@ def train(
         phase = cfg.phases[index]
         backend = phase.backend
         phase_end = phase_start + phase.timesteps
-        venv = _vec_env(cfg, backend, cfg.n_envs, cfg.seed * 1000 + index * 100, subproc)
+        venv = vec_env(cfg, backend, cfg.n_envs, cfg.seed * 1000 + index * 100, subproc)
         if model is None and (resume or index > 0) and (out / "last").exists():
             venv = VecNormalize.load(str(out / "last" / "vecnormalize.pkl"), venv)
             model = PPO.load(
@@ -313,23 +347,7 @@ def train(
             )
         elif model is None:
             venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
-            model = PPO(
-                "MlpPolicy",
-                venv,
-                learning_rate=_lr_schedule(cfg),
-                n_steps=cfg.n_steps,
-                batch_size=cfg.batch_size,
-                n_epochs=cfg.n_epochs,
-                gamma=cfg.gamma,
-                gae_lambda=cfg.gae_lambda,
-                clip_range=cfg.clip_range,
-                ent_coef=cfg.ent_coef,
-                seed=cfg.seed,
-                device="cpu",
-                verbose=0,
-                policy_kwargs={"net_arch": list(cfg.net_arch)},
-                tensorboard_log=str(out / "tb"),
-            )
+            model = new_model(cfg, venv, out / "tb")
         else:  # next phase: same model and statistics, new backend
             stats = model.get_vec_normalize_env()
             assert stats is not None  # every model here is trained under VecNormalize
