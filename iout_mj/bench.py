@@ -150,7 +150,7 @@ def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2)
         fns: list[Any] = [partial(TrivialEnv, n, k)] * n_envs
         inner = SubprocVecEnv(fns, start_method="spawn")
     else:
-        inner = vec_env(cfg, backend, n_envs, cfg.seed, subproc=True)
+        inner = vec_env(cfg, backend, n_envs, cfg.seed, parallel=True)
     venv = VecNormalize(inner, gamma=cfg.gamma)
     model = new_model(cfg, venv)
     rollout = n_envs * cfg.n_steps

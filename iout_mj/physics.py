@@ -8,11 +8,13 @@ actuator is integrated over every substep. The same call leaves the substep traj
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import mujoco
 import numpy as np
 from dm_control.mujoco import engine, wrapper
+from dm_control.rl.control import PhysicsError
 from mujoco import rollout
 from numpy.typing import NDArray
 
@@ -84,10 +86,10 @@ class AUVPhysics(engine.Physics):
                 for i in range(n)
             ]
         )  # (N, 2 actuators, 2: force/velocity)
-        self._nstate = mujoco.mj_stateSize(m, _STATE_SPEC)
-        self._state0 = np.empty((1, self._nstate))
-        self._rollout = rollout.Rollout(nthread=0)
-        self._buffers: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self._nodes = np.array(
+            [m.body(names.node_name(k)).id for k in range(cfg.scenario.n_nodes)], dtype=np.int64
+        )
+        self._stepper: Stepper | None = Stepper()
         self.mech_energy_j = np.zeros((n, 2))
         """Integrated |force x velocity| per AUV: column 0 surge thrust, column 1 yaw."""
         self.substep_qpos: FloatArray = np.zeros((0, m.nq))
@@ -140,41 +142,92 @@ class AUVPhysics(engine.Physics):
         self.substep_qpos = np.zeros((0, self.model.ptr.nq))
         mujoco.mj_forward(self.model.ptr, self.data.ptr)
 
+    def place_scene(self, nodes_m: FloatArray, current_mps: FloatArray) -> None:
+        """Move the node markers and set the ocean current (MuJoCo wind) for an episode."""
+        m = self.model.ptr
+        m.body_pos[self._nodes, :2] = nodes_m
+        m.opt.wind[:2] = current_mps
+
     # ------------------------------------------------------------------ stepping
     def step(self, nstep: int = 1) -> None:
         """Advance `nstep` substeps in C and integrate actuator power over each of them."""
-        m, d = self.model.ptr, self.data.ptr
-        if nstep not in self._buffers:
-            self._buffers[nstep] = (
-                np.empty((1, nstep, m.nu)),
-                np.empty((1, nstep, self._nstate)),
-                np.empty((1, nstep, m.nsensordata)),
-            )
-        ctrl, state, sensordata = self._buffers[nstep]
-        ctrl[:] = d.ctrl
-        mujoco.mj_getState(m, d, self._state0[0], _STATE_SPEC)
-        with self.check_invalid_state():
-            self._rollout.rollout(
-                [m],
-                [d],
-                self._state0,
-                ctrl,
-                nstep=nstep,
-                skip_checks=True,
-                state=state,
-                sensordata=sensordata,
-            )
-        sd = sensordata[0]
-        force = sd[:, self._power_sensors[..., 0]]
-        velocity = sd[:, self._power_sensors[..., 1]]
+        assert self._stepper is not None, "stepped after free()"
+        if self._stepper.step([self], nstep)[0]:
+            raise PhysicsError(DIVERGED)
+
+    def meter(self, state: FloatArray, sensordata: FloatArray) -> None:
+        """Book one rollout of this physics: (substeps, nstate) states and sensor data."""
+        force = sensordata[:, self._power_sensors[..., 0]]
+        velocity = sensordata[:, self._power_sensors[..., 1]]
         self.mech_energy_j += np.abs(force * velocity).sum(axis=0) * self.dt_s
-        self.substep_qpos = state[0, :, 1 : 1 + m.nq]
+        self.substep_qpos = state[:, 1 : 1 + self.model.ptr.nq]
 
     def __getstate__(self) -> Any:
         raise TypeError("AUVPhysics is not picklable; pickle the environment (it rebuilds).")
 
     def free(self) -> None:
-        if getattr(self, "_rollout", None) is not None:
-            self._rollout.close()
-            self._rollout = None
+        stepper = getattr(self, "_stepper", None)
+        if stepper is not None:
+            stepper.close()
+            self._stepper = None
         super().free()
+
+
+DIVERGED = "physics diverged: MuJoCo found a bad position, velocity or acceleration and reset"
+
+
+class Stepper:
+    """Advances several AUVPhysics of the same scene size together: one `mujoco.rollout`
+    call runs every substep in C (on `nthread` threads when > 0), records every substep's
+    state and sensor data, and each physics meters its actuator power from them."""
+
+    def __init__(self, nthread: int = 0):
+        self.nthread = nthread
+        self._rollout = rollout.Rollout(nthread=nthread)
+        self._scratch: list[mujoco.MjData] = []
+        self._buffers: dict[tuple[int, int], tuple[FloatArray, ...]] = {}
+
+    def step(self, physics: Sequence[AUVPhysics], nstep: int) -> NDArray[np.bool_]:
+        """Advance every physics `nstep` substeps; returns which of them diverged (MuJoCo
+        reset its state, or it is not finite) in the meantime."""
+        models = [p.model.ptr for p in physics]
+        m = models[0]
+        if not self._scratch:  # one workspace per thread; each physics keeps its own data
+            self._scratch = [mujoco.MjData(m) for _ in range(max(self.nthread, 1))]
+        key = (len(physics), nstep)
+        if key not in self._buffers:
+            nstate = mujoco.mj_stateSize(m, _STATE_SPEC)
+            self._buffers = {
+                key: (
+                    np.empty((len(physics), nstate)),
+                    np.empty((len(physics), nstep, m.nu)),
+                    np.empty((len(physics), nstep, nstate)),
+                    np.empty((len(physics), nstep, m.nsensordata)),
+                )
+            }
+        state0, ctrl, state, sensordata = self._buffers[key]
+        for i, p in enumerate(physics):
+            mujoco.mj_getState(models[i], p.data.ptr, state0[i], _STATE_SPEC)
+            ctrl[i] = p.data.ptr.ctrl
+        self._rollout.rollout(
+            models,
+            self._scratch,
+            state0,
+            ctrl,
+            nstep=nstep,
+            skip_checks=True,
+            state=state,
+            sensordata=sensordata,
+        )
+        # A MuJoCo auto-reset (bad qpos/qvel/qacc) restarts the clock: the slot's end time shows it.
+        end_s = state0[:, 0] + nstep * np.array([mm.opt.timestep for mm in models])
+        diverged = ~np.isfinite(state[:, -1]).all(axis=1) | (
+            np.abs(state[:, -1, 0] - end_s) > 0.5 * m.opt.timestep
+        )
+        for i, p in enumerate(physics):
+            mujoco.mj_setState(models[i], p.data.ptr, state[i, -1], _STATE_SPEC)
+            p.meter(state[i], sensordata[i])
+        return diverged
+
+    def close(self) -> None:
+        self._rollout.close()

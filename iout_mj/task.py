@@ -1,7 +1,12 @@
-"""dm_control Task on AUVPhysics: actions -> servo setpoints, mission bookkeeping per slot."""
+"""dm_control Task on AUVPhysics: actions -> servo setpoints, mission bookkeeping per slot.
+
+The three module functions join a `Mission` (one env or a batch) to its AUVPhysics (one per
+env); the task uses them with one physics, `vec_env.PhysicsVecEnv` with B.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -9,10 +14,43 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
-from iout_mj import names
 from iout_mj.config import Config
 from iout_mj.mission import Mission
 from iout_mj.physics import AUVPhysics
+
+
+def start_episode(mission: Mission, physics: AUVPhysics, env: Any = ()) -> None:
+    """Put environment `env` of a just reset `mission` (nodes, current, vehicles) into physics."""
+    physics.place_scene(mission.network.nodes_m[env], mission.current_mps[env])
+    physics.set_poses(mission.positions_m[env], mission.headings_rad[env], mission.speeds_mps[env])
+
+
+def command(mission: Mission, physics: Sequence[AUVPhysics], action: Any) -> np.ndarray:
+    """Apply an action: setpoints to every vehicle's servos. Returns the energy meters'
+    readings at the start of the slot, for `book`."""
+    heading_sp, speed_sp = mission.begin_slot(action)
+    n = mission.n_auvs
+    for p, h, v in zip(physics, heading_sp.reshape(-1, n), speed_sp.reshape(-1, n), strict=True):
+        p.set_commands(h, v)
+    return np.stack([p.mech_energy_j for p in physics])
+
+
+def book(mission: Mission, physics: Sequence[AUVPhysics], meters_before_j: np.ndarray) -> Any:
+    """Book the slot the vehicles have just flown (measured state and energy); returns the
+    reward (per environment)."""
+    b, n = mission.batch, mission.n_auvs
+    mech = (np.stack([p.mech_energy_j for p in physics]) - meters_before_j) / (
+        mission.cfg.motion.prop_efficiency
+    )
+    path = np.stack([p.substep_positions_m() for p in physics], axis=1)
+    return mission.end_slot(
+        np.stack([p.positions_m() for p in physics]).reshape(*b, n, 2),
+        np.stack([p.headings_rad() for p in physics]).reshape(*b, n),
+        np.stack([p.speeds_mps() for p in physics]).reshape(*b, n),
+        mech[..., 0].reshape(*b, n),
+        mech[..., 1].reshape(*b, n),
+        path.reshape(len(path), *b, n, 2),
+    )
 
 
 class DataCollectionTask(base.Task):
@@ -22,36 +60,23 @@ class DataCollectionTask(base.Task):
         super().__init__(random=random)
         self.cfg = cfg
         self.mission = Mission(cfg, random_layout_per_episode=random_layout)
+        self._meters_j = np.zeros(0)
 
     def reseed(self, seed: int | None) -> None:
         self._random = np.random.RandomState(seed)
 
     def initialize_episode(self, physics: AUVPhysics) -> None:
-        start, heading, speed = self.mission.reset(self.random)
-        m = physics.model.ptr
-        for k, (x, y) in enumerate(self.mission.network.nodes_m):
-            m.body_pos[m.body(names.node_name(k)).id, :2] = (x, y)
-        m.opt.wind[:2] = self.mission.current_mps
-        physics.set_poses(start, heading, speed)
+        self.mission.reset(self.random)
+        start_episode(self.mission, physics)
 
     def action_spec(self, physics: AUVPhysics) -> specs.BoundedArray:
         return self.mission.action_spec()
 
     def before_step(self, action: Any, physics: AUVPhysics) -> None:
-        heading_sp, speed_sp = self.mission.begin_slot(action)
-        physics.set_commands(heading_sp, speed_sp)
-        self._energy_before = physics.mech_energy_j.copy()
+        self._meters_j = command(self.mission, [physics], action)
 
     def after_step(self, physics: AUVPhysics) -> None:
-        mech = (physics.mech_energy_j - self._energy_before) / self.cfg.motion.prop_efficiency
-        self.mission.end_slot(
-            physics.positions_m(),
-            physics.headings_rad(),
-            physics.speeds_mps(),
-            mech[:, 0],
-            mech[:, 1],
-            physics.substep_positions_m(),
-        )
+        book(self.mission, [physics], self._meters_j)
 
     def get_observation(self, physics: AUVPhysics) -> dict[str, np.ndarray]:
         return self.mission.observation()
@@ -67,15 +92,21 @@ class DataCollectionTask(base.Task):
         return None
 
 
+def substeps_per_slot(cfg: Config, dt_s: float) -> int:
+    """Physics substeps in one slot; the slot must be a whole number of timesteps."""
+    n_sub = round(cfg.scenario.slot_s / dt_s)
+    if abs(n_sub * dt_s - cfg.scenario.slot_s) > 1e-9 * cfg.scenario.slot_s:
+        raise ValueError(
+            f"slot_s={cfg.scenario.slot_s} is not a multiple of physics timestep_s={dt_s}"
+        )
+    return n_sub
+
+
 def make_environment(
     cfg: Config, seed: int | None = None, random_layout: bool = False
 ) -> control.Environment:
     """The dm_control environment: AUVPhysics + DataCollectionTask, one slot per step."""
     physics = AUVPhysics.from_config(cfg)
     task = DataCollectionTask(cfg, random=seed, random_layout=random_layout)
-    n_sub = round(cfg.scenario.slot_s / physics.dt_s)
-    if abs(n_sub * physics.dt_s - cfg.scenario.slot_s) > 1e-9 * cfg.scenario.slot_s:
-        raise ValueError(
-            f"slot_s={cfg.scenario.slot_s} is not a multiple of physics timestep_s={physics.dt_s}"
-        )
+    n_sub = substeps_per_slot(cfg, physics.dt_s)
     return control.Environment(physics, task, n_sub_steps=n_sub, legacy_step=False)

@@ -122,21 +122,21 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
     return Monitor(env)
 
 
-def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, subproc: bool) -> Any:
-    """The kinematic backend as one batched VecEnv in this process; the MuJoCo backend as
-    one env per worker process (SubprocVecEnv) when `subproc`."""
-    from functools import partial
+def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bool) -> Any:
+    """The training VecEnv: one batch of `n_envs` environments in this process, for either
+    backend (`vec_env.KinematicVecEnv` / `PhysicsVecEnv`); with `parallel`, the MuJoCo
+    rollout runs on one C thread per core."""
+    import os
 
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
+    from stable_baselines3.common.vec_env import VecMonitor
 
+    from iout_mj.vec_env import KinematicVecEnv, PhysicsVecEnv
+
+    args = (n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout)
     if backend == "kinematic":
-        from iout_mj.vec_env import KinematicVecEnv
-
-        return VecMonitor(KinematicVecEnv(n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout, seed=seed))
-    fns: list[Any] = [partial(make_env, cfg, backend, seed + i) for i in range(n_envs)]
-    if subproc and n_envs > 1:
-        return SubprocVecEnv(fns, start_method="spawn")
-    return DummyVecEnv(fns)
+        return VecMonitor(KinematicVecEnv(*args, seed=seed))
+    threads = min(n_envs, os.cpu_count() or 1) if parallel else 0
+    return VecMonitor(PhysicsVecEnv(*args, seed=seed, nthread=threads))
 
 
 @dataclass
@@ -236,7 +236,7 @@ def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> A
 
 
 def train(
-    cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = True, subproc: bool = True
+    cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = True, parallel: bool = True
 ) -> RunState:
     """Train PPO through every phase; checkpoints in `out`."""
     import torch
@@ -333,7 +333,7 @@ def train(
         phase = cfg.phases[index]
         backend = phase.backend
         phase_end = phase_start + phase.timesteps
-        venv = vec_env(cfg, backend, cfg.n_envs, cfg.seed * 1000 + index * 100, subproc)
+        venv = vec_env(cfg, backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
         if model is None and (resume or index > 0) and (out / "last").exists():
             venv = VecNormalize.load(str(out / "last" / "vecnormalize.pkl"), venv)
             model = PPO.load(

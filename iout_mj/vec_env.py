@@ -1,11 +1,17 @@
-"""The kinematic backend as a stable-baselines3 `VecEnv`: B environments in one numpy batch.
+"""Both backends as stable-baselines3 `VecEnv`s: B environments in one batched `Mission`.
 
-One `step` call moves all B environments with `kinematic.move` on a batched `Mission` (the
-same mission, network and reward code as every other backend), on one core, with no Python
-loop over environments except the info dicts of the ones that finish. Finished environments
-restart at once (SB3 convention): their `info` holds `terminal_observation`,
-`TimeLimit.truncated` and `metrics` (wrap in SB3's `VecMonitor` for episode returns); the
-reward terms of the last step are `venv.mission.terms` (arrays of B), not per-step infos.
+One `step` call moves all B environments (the same mission, network and reward code as the
+gymnasium env) with no Python loop over environments except the info dicts of the ones that
+finish:
+
+- `KinematicVecEnv`: the paper's kinematics on the batch (`kinematic.move`), one core.
+- `PhysicsVecEnv`: B MuJoCo scenes stepped by one `mujoco.rollout` call, whose C threads
+  (`nthread`) share the slot's substeps between cores: no worker processes, no pickling.
+
+Finished environments restart at once (SB3 convention): their `info` holds
+`terminal_observation`, `TimeLimit.truncated` and `metrics` (and `error` if the physics
+diverged); wrap in SB3's `VecMonitor` for episode returns. The reward terms of the last step
+are `venv.mission.terms` (arrays of B), not per-step infos.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from numpy.typing import NDArray
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
@@ -28,24 +35,20 @@ from iout_mj.envs import resolve_config
 from iout_mj.kinematic import move
 from iout_mj.mission import OBS_HIGH, OBS_LOW, Mission
 
+ConfigLike = Config | dict[str, Any] | str | Path | None
 
-class KinematicVecEnv(VecEnv):
-    """B kinematic environments stepped together; spaces as `iout_mj/MultiAUV-v0`.
 
-    Args:
-        n_envs: B, the number of environments.
-        n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
-        seed: seeds the one RNG of the batch (also `venv.seed(s)` before `reset()`).
-    """
+class MissionVecEnv(VecEnv):
+    """A batched Mission behind the VecEnv interface; subclasses move the vehicles."""
 
     def __init__(
         self,
         n_envs: int,
-        n_auvs: int | None = None,
-        n_nodes: int | None = None,
-        layout: str = "paper",
-        config: Config | dict[str, Any] | str | Path | None = None,
-        seed: int | None = None,
+        n_auvs: int | None,
+        n_nodes: int | None,
+        layout: str,
+        config: ConfigLike,
+        seed: int | None,
     ):
         if not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
             raise ValueError(f"n_envs={n_envs!r} is invalid: accepted an integer >= 1")
@@ -61,12 +64,22 @@ class KinematicVecEnv(VecEnv):
         )
         self._actions: Any = None
 
+    # ------------------------------------------------------------------ subclass hooks
+    def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """One slot for every environment: rewards, and which envs failed (diverged)."""
+        raise NotImplementedError
+
+    def _restart(self, mask: NDArray[np.bool_] | None) -> None:
+        """Start new episodes where `mask` (everywhere for None)."""
+        self.mission.reset(self.random, mask)
+
+    # ------------------------------------------------------------------ VecEnv
     def reset(self) -> VecEnvObs:
         seed = self._seeds[0]
         if seed is not None:
             self.random = np.random.RandomState(seed)
         self._reset_seeds()
-        self.mission.reset(self.random)
+        self._restart(None)
         return self.mission.flat_observation()
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -74,9 +87,9 @@ class KinematicVecEnv(VecEnv):
 
     def step_wait(self) -> VecEnvStepReturn:
         m = self.mission
-        rewards = move(m, self._actions).astype(np.float32)
+        rewards, failed = self._move(self._actions)
         obs = m.flat_observation()
-        terminated = m.terminated
+        terminated = m.terminated | failed
         done = terminated | m.truncated
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if done.any():
@@ -86,8 +99,12 @@ class KinematicVecEnv(VecEnv):
                     "TimeLimit.truncated": bool(not terminated[e]),
                     "metrics": m.metrics(int(e)),
                 }
-            m.reset(self.random, done)
+                if failed[e]:
+                    infos[e]["error"] = "physics diverged (MuJoCo reset the state)"
+                    infos[e]["terminal_observation"] = np.zeros_like(obs[e])
+            self._restart(done)
             obs[done] = m.flat_observation()[done]
+        rewards = np.where(failed, 0.0, rewards).astype(np.float32)
         return obs, rewards, done, infos
 
     def close(self) -> None:
@@ -98,16 +115,16 @@ class KinematicVecEnv(VecEnv):
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         raise AttributeError(
-            f"set_attr({attr_name!r}): the environments of a KinematicVecEnv share one batch "
-            "and have no per-environment attributes"
+            f"set_attr({attr_name!r}): the environments of a {type(self).__name__} share one "
+            "batch and have no per-environment attributes"
         )
 
     def env_method(
         self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kw: Any
     ) -> list[Any]:
         raise AttributeError(
-            f"env_method({method_name!r}): a KinematicVecEnv has no per-environment objects; "
-            "use venv.mission"
+            f"env_method({method_name!r}): a {type(self).__name__} has no per-environment "
+            "objects; use venv.mission"
         )
 
     def env_is_wrapped(
@@ -119,3 +136,77 @@ class KinematicVecEnv(VecEnv):
         if indices is None:
             return range(self.num_envs)
         return [indices] if isinstance(indices, int) else list(indices)
+
+
+class KinematicVecEnv(MissionVecEnv):
+    """B kinematic environments stepped together; spaces as `iout_mj/MultiAUV-v0`.
+
+    Args:
+        n_envs: B, the number of environments.
+        n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
+        seed: seeds the one RNG of the batch (also `venv.seed(s)` before `reset()`).
+    """
+
+    def __init__(
+        self,
+        n_envs: int,
+        n_auvs: int | None = None,
+        n_nodes: int | None = None,
+        layout: str = "paper",
+        config: ConfigLike = None,
+        seed: int | None = None,
+    ):
+        super().__init__(n_envs, n_auvs, n_nodes, layout, config, seed)
+        self._ok = np.zeros(n_envs, dtype=bool)
+
+    def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        return move(self.mission, actions), self._ok
+
+
+class PhysicsVecEnv(MissionVecEnv):
+    """B MuJoCo environments stepped together; spaces as `iout_mj/MultiAUV-v0`.
+
+    Args:
+        n_envs, n_auvs, n_nodes, layout, config, seed: as for `KinematicVecEnv`.
+        nthread: C threads of the rollout (0: the calling thread; at most one per core helps).
+    """
+
+    def __init__(
+        self,
+        n_envs: int,
+        n_auvs: int | None = None,
+        n_nodes: int | None = None,
+        layout: str = "paper",
+        config: ConfigLike = None,
+        seed: int | None = None,
+        nthread: int = 0,
+    ):
+        from iout_mj.physics import AUVPhysics, Stepper
+        from iout_mj.task import substeps_per_slot
+
+        if not isinstance(nthread, (int, np.integer)) or nthread < 0:
+            raise ValueError(f"nthread={nthread!r} is invalid: accepted an integer >= 0")
+        super().__init__(n_envs, n_auvs, n_nodes, layout, config, seed)
+        self.physics = [AUVPhysics.from_config(self.cfg) for _ in range(self.num_envs)]
+        self.substeps = substeps_per_slot(self.cfg, self.physics[0].dt_s)
+        self._stepper = Stepper(nthread)
+
+    def _restart(self, mask: NDArray[np.bool_] | None) -> None:
+        from iout_mj.task import start_episode
+
+        super()._restart(mask)
+        rows = range(self.num_envs) if mask is None else np.flatnonzero(mask)
+        for e in rows:
+            start_episode(self.mission, self.physics[e], int(e))
+
+    def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        from iout_mj.task import book, command
+
+        meters = command(self.mission, self.physics, actions)
+        failed = self._stepper.step(self.physics, self.substeps)
+        return book(self.mission, self.physics, meters), failed
+
+    def close(self) -> None:
+        self._stepper.close()
+        for p in self.physics:
+            p.free()

@@ -35,7 +35,7 @@ def small(**kw):
 
 def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
     cfg = small()
-    state = train(cfg, tmp_path, progress=False, subproc=False)
+    state = train(cfg, tmp_path, progress=False, parallel=False)
     assert state.num_timesteps == 256 and state.phase == 2
     assert [h["backend"] for h in state.history][-1] == "mujoco"
     for folder in ("last", "best"):
@@ -57,19 +57,19 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
             tmp_path,
             resume=True,
             progress=False,
-            subproc=False,
+            parallel=False,
         )
     with pytest.raises(FileExistsError, match="--resume"):
-        train(cfg, tmp_path, progress=False, subproc=False)
+        train(cfg, tmp_path, progress=False, parallel=False)
     state_file = json.loads((tmp_path / "state.json").read_text())
     state_file["phase"], state_file["num_timesteps"] = 1, 128  # as if killed mid-run
     (tmp_path / "state.json").write_text(json.dumps(state_file))
-    resumed = train(cfg, tmp_path, resume=True, progress=False, subproc=False)
+    resumed = train(cfg, tmp_path, resume=True, progress=False, parallel=False)
     assert resumed.num_timesteps == 256
 
 
 def test_policy_for_other_scenario_is_refused(tmp_path):
-    train(small(phases=(PhaseConfig("kinematic", 64),)), tmp_path, progress=False, subproc=False)
+    train(small(phases=(PhaseConfig("kinematic", 64),)), tmp_path, progress=False, parallel=False)
     env = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=7)
     with pytest.raises(ValueError, match=r"trained for N=1, K=7.*this env has N=2, K=7"):
         load_policy(str(tmp_path / "last"), env)

@@ -11,7 +11,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from iout_mj.envs import ENV_ID
 from iout_mj.kinematic import move
 from iout_mj.mission import ActionError, Mission
-from iout_mj.vec_env import KinematicVecEnv
+from iout_mj.vec_env import KinematicVecEnv, PhysicsVecEnv
 
 
 def docked_start(cfg):
@@ -27,16 +27,14 @@ def docked_start(cfg):
     return cfg.replace(scenario=sc)
 
 
-def test_batch_matches_independent_environments(cfg, rng):
-    cfg = docked_start(cfg)
-    b = 4
-    venv = KinematicVecEnv(b, config=cfg, seed=0)
-    singles = [gym.make(ENV_ID, backend="kinematic", config=cfg) for _ in range(b)]
+def assert_batch_matches_independent_envs(venv, backend, cfg, rng, steps):
+    b = venv.num_envs
+    singles = [gym.make(ENV_ID, backend=backend, config=cfg) for _ in range(b)]
     obs = venv.reset()
     for e, env in enumerate(singles):
         np.testing.assert_array_equal(obs[e], env.reset(seed=e)[0])
     ends = np.zeros(b, dtype=int)
-    for _ in range(120):
+    for _ in range(steps):
         actions = rng.integers(0, venv.action_space.nvec, size=(b, venv.action_space.shape[0]))
         actions[0, 0::4] = 5  # env 0 flies straight on (dtheta 0) ...
         actions[0, 1::4] = 6  # ... speeding up to 1.4 m/s: it docks after one slot
@@ -53,8 +51,37 @@ def test_batch_matches_independent_environments(cfg, rng):
                     assert infos[e]["metrics"][key] == pytest.approx(value), key
                 o, _ = env.reset()
             np.testing.assert_allclose(obs[e], o, atol=1e-6)
-    assert ends[0] == 120  # one-slot episodes
-    assert ends[1:].min() > 0 and ends[1:].max() < 120  # others end at the horizon or docked
+    assert ends[0] == steps  # one-slot episodes
+    assert ends[1:].min() > 0 and ends[1:].max() < steps  # others end later, when they may
+
+
+def test_kinematic_batch_matches_independent_environments(cfg, rng):
+    cfg = docked_start(cfg)
+    assert_batch_matches_independent_envs(
+        KinematicVecEnv(4, config=cfg), "kinematic", cfg, rng, 120
+    )
+
+
+def test_physics_batch_on_two_threads_matches_independent_environments(cfg, rng):
+    cfg = docked_start(cfg)
+    venv = PhysicsVecEnv(3, config=cfg, nthread=2)
+    assert_batch_matches_independent_envs(venv, "mujoco", cfg, rng, 70)
+    venv.close()
+
+
+def test_diverged_physics_ends_only_its_environment(cfg, rng):
+    venv = PhysicsVecEnv(3, config=cfg, seed=0)
+    venv.reset()
+    venv.physics[1].data.qvel[:] = 1e200
+    act = rng.integers(0, venv.action_space.nvec, size=(3, venv.action_space.shape[0]))
+    obs, rewards, dones, infos = venv.step(act)
+    assert dones.tolist() == [False, True, False]
+    assert "diverged" in infos[1]["error"] and "metrics" in infos[1]
+    assert rewards[1] == 0.0 and np.isfinite(obs).all()
+    assert venv.mission.slot.tolist() == [1, 0, 1]  # env 1 restarted, the others go on
+    with pytest.raises(ValueError, match="nthread=-1"):
+        PhysicsVecEnv(2, config=cfg, nthread=-1)
+    venv.close()
 
 
 def test_partial_reset_only_touches_masked_rows(cfg):
