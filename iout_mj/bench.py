@@ -11,6 +11,9 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
 
 REPEATS = 3
 
@@ -37,8 +40,8 @@ def _random_actions(space: Any, count: int = 64, batch: tuple[int, ...] = ()) ->
     return [rng.integers(0, space.nvec, size=(*batch, len(space.nvec))) for _ in range(count)]
 
 
-def _env_rate(env: Any, steps: int) -> float:
-    """Env steps/s with random valid actions; every repeat replays the same episodes."""
+def _env_pass(env: Any, steps: int) -> Callable[[], int]:
+    """A run of `steps` env steps with random valid actions, the same episodes every time."""
     actions = _random_actions(env.action_space)
 
     def run() -> int:
@@ -49,42 +52,99 @@ def _env_rate(env: Any, steps: int) -> float:
                 env.reset()
         return steps
 
+    return run
+
+
+def _env_rate(env: Any, steps: int) -> float:
+    run = _env_pass(env, steps)
     run()  # warm up
     return _median_rate(run)
 
 
-def slot_vs_raw(n: int, k: int, slots: int = 40) -> dict[str, float]:
-    """Env steps/s of the MuJoCo backend over plain mj_step(nstep) on the same model, from
-    the same states with the same controls (so both do the same physics work)."""
+PHYSICS_BATCH = 8
+"""Environments per PhysicsVecEnv call in the benchmarks (the training configuration's)."""
+
+
+def _raw_pass(
+    model: Any, inputs: list[tuple[FloatArray, FloatArray]], nstep: int
+) -> Callable[[], int]:
+    """Plain mj_step(nstep) from recorded (start state, control) pairs, one slot each."""
     import mujoco
 
-    env = _env("mujoco", n, k)
-    physics = env.physics
-    m, d, nstep = physics.model.ptr, physics.data.ptr, env._env._n_sub_steps
+    data = mujoco.MjData(model)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    starts, ctrls = np.empty((slots, mujoco.mj_stateSize(m, spec))), np.empty((slots, m.nu))
-    actions = _random_actions(env.action_space)
-    env.reset(seed=0)
-    for i in range(slots):  # record every slot's start state and control (same as _env_rate)
-        mujoco.mj_getState(m, d, starts[i], spec)
-        _, _, term, trunc, _ = env.step(actions[i % len(actions)])
-        ctrls[i] = d.ctrl
-        if term or trunc:
-            env.reset()
-    env_rate = _env_rate(env, slots)
-    raw_data = mujoco.MjData(m)
 
-    def raw() -> int:
-        for i in range(slots):
-            mujoco.mj_setState(m, raw_data, starts[i], spec)
-            raw_data.ctrl[:] = ctrls[i]
-            mujoco.mj_step(m, raw_data, nstep)
-        return slots
+    def run() -> int:
+        for state, ctrl in inputs:
+            mujoco.mj_setState(model, data, state, spec)
+            data.ctrl[:] = ctrl
+            mujoco.mj_step(model, data, nstep)
+        return len(inputs)
 
-    raw()
-    raw_rate = _median_rate(raw)
+    return run
+
+
+def _paired(env_run: Callable[[], int], raw_run: Callable[[], int]) -> dict[str, float]:
+    """Env and raw rates measured alternately (so that machine noise hits both alike); the
+    ratio is the median of the per-pair ratios."""
+    env_run(), raw_run()  # warm up
+    pairs = []
+    for _ in range(2 * REPEATS - 1):
+        pairs.append((_median_rate(env_run, 1), _median_rate(raw_run, 1)))
+    env, raw = np.array(pairs).T
+    return {
+        "env_steps_per_s": float(np.median(env)),
+        "raw_slots_per_s": float(np.median(raw)),
+        "ratio": float(np.median(env / raw)),
+    }
+
+
+def _recorded(stepper: Any, calls: Callable[[], Any]) -> list[tuple[FloatArray, FloatArray]]:
+    """Run `calls` once, keeping every env's (start state, control) of every rollout."""
+    kept: list[tuple[FloatArray, FloatArray]] = []
+    step = stepper.step
+
+    def recording(physics: Any, nstep: int) -> Any:
+        out = step(physics, nstep)
+        state0, ctrl = stepper.inputs
+        kept.extend((state0[i].copy(), ctrl[i, 0].copy()) for i in range(len(physics)))
+        return out
+
+    stepper.step = recording
+    try:
+        calls()
+    finally:
+        del stepper.step
+    return kept
+
+
+def slot_vs_raw(n: int, k: int, slots: int = 40) -> dict[str, float]:
+    """MuJoCo env steps/s over plain mj_step(nstep) on the same model from the same states
+    with the same controls (so both do the same physics work): one env through gymnasium and
+    dm_control, and a `PhysicsVecEnv` batch on one thread."""
+    from iout_mj.evaluation import scenario_config
+    from iout_mj.vec_env import PhysicsVecEnv
+
+    env = _env("mujoco", n, k)
+    model, nstep = env.physics.model.ptr, env._env._n_sub_steps
+    run = _env_pass(env, slots)
+    single = _paired(run, _raw_pass(model, _recorded(env.physics._stepper, run), nstep))
     env.close()
-    return {"env_steps_per_s": env_rate, "raw_slots_per_s": raw_rate, "ratio": env_rate / raw_rate}
+
+    venv = PhysicsVecEnv(PHYSICS_BATCH, config=scenario_config(n, k), seed=0)
+    actions = _random_actions(venv.action_space, 16, (PHYSICS_BATCH,))
+    calls = max(slots // PHYSICS_BATCH, 4)
+
+    def batch_run() -> int:
+        venv.seed(0)
+        venv.reset()
+        for i in range(calls):
+            venv.step(actions[i % len(actions)])
+        return calls * PHYSICS_BATCH
+
+    batch = _paired(batch_run, _raw_pass(model, _recorded(venv._stepper, batch_run), nstep))
+    venv.close()
+    return {**single, **{f"batch_{PHYSICS_BATCH}_{key}": v for key, v in batch.items()}}
 
 
 KINEMATIC_BATCH = 64
@@ -135,20 +195,19 @@ class TrivialEnv(gym.Env):
 
 def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2) -> float:
     """PPO steps/s (collection + updates) with the training configuration's hyperparameters
-    and vectorisation (`training.vec_env`: MuJoCo in worker processes, the kinematic batch in
-    this one); None = `TrivialEnv` in as many worker processes."""
+    and vectorisation (`training.vec_env`: one in-process batch of `n_envs`); None =
+    `TrivialEnv` x `n_envs`, in-process too (DummyVecEnv)."""
     from functools import partial
 
     import torch
-    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from iout_mj.training import TrainConfig, new_model, vec_env
 
     cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs)
     torch.set_num_threads(cfg.torch_threads)
     if backend is None:
-        fns: list[Any] = [partial(TrivialEnv, n, k)] * n_envs
-        inner = SubprocVecEnv(fns, start_method="spawn")
+        inner = DummyVecEnv([partial(TrivialEnv, n, k)] * n_envs)
     else:
         inner = vec_env(cfg, backend, n_envs, cfg.seed, parallel=True)
     venv = VecNormalize(inner, gamma=cfg.gamma)
@@ -207,65 +266,55 @@ def render_fps(frames: int = 16) -> float:
     return rate
 
 
-def _rss_mb(pids: list[int]) -> float:
-    total = 0
-    for pid in pids:
-        try:
-            with open(f"/proc/{pid}/status") as f:
-                text = f.read()
-            total += int(text.split("VmRSS:")[1].split()[0])
-        except (OSError, IndexError):
-            pass
-    return total / 1024
+def thread_scaling(n: int, k: int, calls: int = 5) -> float:
+    """PhysicsVecEnv steps/s on two rollout threads over one (both in one process)."""
+    from iout_mj.evaluation import scenario_config
+    from iout_mj.vec_env import PhysicsVecEnv
+
+    rates = []
+    for nthread in (0, 2):
+        venv = PhysicsVecEnv(PHYSICS_BATCH, config=scenario_config(n, k), seed=0, nthread=nthread)
+        actions = _random_actions(venv.action_space, 16, (PHYSICS_BATCH,))
+        venv.reset()
+
+        def run() -> int:
+            for i in range(calls):
+                venv.step(actions[i % len(actions)])  # noqa: B023 (called within the loop)
+            return calls * PHYSICS_BATCH
+
+        run()
+        rates.append(_median_rate(run))
+        venv.close()
+    return rates[1] / rates[0]
 
 
-def memory_mb(n_envs: int = 8) -> dict[str, float]:
-    """Resident memory of one MuJoCo env (this process) and of a training setup with workers."""
+def _peak_rss_mb(code: str) -> float:
+    """Peak resident memory (VmHWM) of a fresh Python process running `code`."""
     import subprocess
     import sys
 
-    code = (
+    code += "\nprint(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return int(out.stdout.split()[-1]) / 1024
+
+
+def memory_mb(n_envs: int = PHYSICS_BATCH) -> dict[str, float]:
+    """Peak resident memory of one MuJoCo env over an episode, and of PPO training on the
+    MuJoCo backend as configured (one process: `n_envs` scenes, rollout threads, PPO)."""
+    one = _peak_rss_mb(
         "import gymnasium as gym, iout_mj\n"
         "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=2, n_nodes=7)\n"
         "env.reset(seed=0)\n"
         "for _ in range(55): env.step(env.action_space.sample())\n"
-        "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
     )
-    one = (
-        int(
-            subprocess.run(
-                [sys.executable, "-c", code], capture_output=True, text=True, check=True
-            ).stdout.split()[-1]
-        )
-        / 1024
+    train = _peak_rss_mb(
+        "from stable_baselines3.common.vec_env import VecNormalize\n"
+        "from iout_mj.training import TrainConfig, new_model, vec_env\n"
+        f"cfg = TrainConfig(n_auvs=2, n_nodes=7, n_envs={n_envs}, n_steps=64, batch_size=64)\n"
+        f"venv = VecNormalize(vec_env(cfg, 'mujoco', {n_envs}, 0, parallel=True))\n"
+        f"new_model(cfg, venv).learn({2 * 64 * n_envs})\n"
     )
-    from functools import partial
-
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
-
-    from iout_mj.training import TrainConfig, make_env
-
-    cfg = TrainConfig(n_auvs=2, n_nodes=7)
-    venv = VecNormalize(
-        SubprocVecEnv(
-            [partial(make_env, cfg, "mujoco", i) for i in range(n_envs)], start_method="spawn"
-        )
-    )
-    model = PPO(
-        "MlpPolicy",
-        venv,
-        n_steps=64,
-        batch_size=64,
-        device="cpu",
-        verbose=0,
-        policy_kwargs={"net_arch": [256, 256]},
-    )
-    model.learn(n_envs * 64)
-    pids = [os.getpid()] + [p.pid for p in venv.venv.processes]  # type: ignore[attr-defined]
-    train = _rss_mb(pids)
-    venv.close()
-    return {"one_env_mb": one, "training_mb": train, "training_workers": n_envs}
+    return {"one_env_mb": one, "training_mb": train, "training_envs": n_envs}
 
 
 def run_all(quick: bool = False) -> dict[str, Any]:
@@ -291,7 +340,7 @@ def run_all(quick: bool = False) -> dict[str, Any]:
     result["kinematic_steps_per_s"] = {key: v[f"batch_{KINEMATIC_BATCH}"] for key, v in kin.items()}
     result["kinematic_single_env_steps_per_s"] = {key: v["single_env"] for key, v in kin.items()}
     result["kinematic_batch"] = KINEMATIC_BATCH
-    n_envs, rollouts = (2, 1) if quick else (8, 2)
+    n_envs, rollouts = (2, 1) if quick else (PHYSICS_BATCH, 2)
     fps = {b: ppo_fps(b, 2, 7, n_envs, rollouts) for b in ("mujoco", "kinematic", None)}
     result["ppo_fps"] = {
         "physics": fps["mujoco"],
@@ -302,8 +351,9 @@ def run_all(quick: bool = False) -> dict[str, Any]:
     steps = 10 if quick else 60
     one, two = _worker_rate(1, 2, 7, steps), _worker_rate(2, 2, 7, steps)
     result["subproc_scaling"] = two / one
+    result["thread_scaling"] = thread_scaling(2, 7, 2 if quick else 5)
     result["render_fps"] = render_fps(4 if quick else 16)
-    result["memory"] = memory_mb(2 if quick else 8)
+    result["memory"] = memory_mb(2 if quick else PHYSICS_BATCH)
     return result
 
 
@@ -313,11 +363,16 @@ def format_table(r: dict[str, Any]) -> str:
         f"dt {r['timestep_s']} s, {r['substeps_per_slot']} substeps per 25 s slot",
         "",
     ]
-    lines.append("slot_vs_raw (MuJoCo env steps/s over plain mj_step(nstep); target >= 0.9)")
+    lines.append(
+        "slot_vs_raw (MuJoCo env steps/s over plain mj_step(nstep) from the same states; "
+        f"target >= 0.9): one gymnasium env | PhysicsVecEnv of {PHYSICS_BATCH}, one thread"
+    )
+    b = f"batch_{PHYSICS_BATCH}_"
     for key, v in r["slot_vs_raw"].items():
         lines.append(
-            f"  {key:<7} env {v['env_steps_per_s']:8.1f} /s   raw "
-            f"{v['raw_slots_per_s']:8.1f} /s   ratio {v['ratio']:.3f}"
+            f"  {key:<7} env {v['env_steps_per_s']:6.1f}/s raw {v['raw_slots_per_s']:6.1f}/s "
+            f"ratio {v['ratio']:.3f} | env {v[b + 'env_steps_per_s']:6.1f}/s raw "
+            f"{v[b + 'raw_slots_per_s']:6.1f}/s ratio {v[b + 'ratio']:.3f}"
         )
     lines.append(
         f"kinematic_steps_per_s (one core, KinematicVecEnv of {r['kinematic_batch']} envs; "
@@ -331,10 +386,11 @@ def format_table(r: dict[str, Any]) -> str:
         f"{p['trivial']:.0f} steps/s; target >= 0.6); kinematic batch {p['kinematic']:.0f} steps/s"
     )
     lines.append(f"subproc_scaling {r['subproc_scaling']:.3f} (2 workers / 1; target >= 1.8)")
+    lines.append(f"thread_scaling {r['thread_scaling']:.3f} (PhysicsVecEnv, 2 rollout threads / 1)")
     lines.append(f"render_fps {r['render_fps']:.1f} (640x480, top-down + chase, overlays)")
     mem = r["memory"]
     lines.append(
-        f"memory: one env {mem['one_env_mb']:.0f} MB; training with "
-        f"{mem['training_workers']} workers {mem['training_mb']:.0f} MB"
+        f"memory (peak RSS): one env {mem['one_env_mb']:.0f} MB; PPO on the MuJoCo backend "
+        f"with {mem['training_envs']} envs (one process) {mem['training_mb']:.0f} MB"
     )
     return "\n".join(lines)

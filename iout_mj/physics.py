@@ -206,6 +206,8 @@ class Stepper:
                 )
             }
         state0, ctrl, state, sensordata = self._buffers[key]
+        self.inputs = (state0, ctrl)
+        """Start states (B, nstate) and controls (B, nstep, nu) of the last step."""
         for i, p in enumerate(physics):
             mujoco.mj_getState(models[i], p.data.ptr, state0[i], _STATE_SPEC)
             ctrl[i] = p.data.ptr.ctrl

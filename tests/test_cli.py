@@ -87,3 +87,14 @@ def test_unknown_policy_is_a_clear_error(tmp_path):
         check=False,
     )
     assert out.returncode == 2 and "unknown policy 'genius'" in out.stderr
+
+
+@pytest.mark.slow
+def test_bench_quick_json_has_every_measure():
+    r = json.loads(run("bench", "--quick", "--json").stdout)
+    assert {"slot_vs_raw", "kinematic_steps_per_s", "ppo_fps_ratio", "subproc_scaling"} <= set(r)
+    assert {"thread_scaling", "render_fps", "memory", "timestep_s", "substeps_per_slot"} <= set(r)
+    (row,) = r["slot_vs_raw"].values()
+    assert 0 < row["ratio"] < 2 and 0 < row["batch_8_ratio"] < 2
+    assert r["substeps_per_slot"] * r["timestep_s"] == pytest.approx(25.0)
+    assert r["kinematic_steps_per_s"]["N2_K13"] > r["kinematic_single_env_steps_per_s"]["N2_K13"]
