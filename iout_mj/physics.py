@@ -95,27 +95,31 @@ class AUVPhysics(engine.Physics):
         self.substep_qpos: FloatArray = np.zeros((0, m.nq))
 
     # ------------------------------------------------------------------ accessors
-    def positions_m(self) -> FloatArray:
-        return self.data.ptr.qpos[self._qxy]
+    # Each reads this physics' state, or the same fields of given qpos / qvel arrays with any
+    # leading axes (every physics of one config shares the layout: see `task.book`).
+    def positions_m(self, qpos: FloatArray | None = None) -> FloatArray:
+        """(..., N, 2) positions."""
+        return (self.data.ptr.qpos if qpos is None else qpos)[..., self._qxy]
 
-    def yaw_rad(self) -> FloatArray:
-        """Unwrapped yaw angles (continuous across +-pi)."""
-        return self.data.ptr.qpos[self._qyaw]
+    def yaw_rad(self, qpos: FloatArray | None = None) -> FloatArray:
+        """(..., N) unwrapped yaw angles (continuous across +-pi)."""
+        return (self.data.ptr.qpos if qpos is None else qpos)[..., self._qyaw]
 
-    def headings_rad(self) -> FloatArray:
-        """Headings wrapped to (-pi, pi]."""
-        return wrap_angle(self.yaw_rad())
+    def headings_rad(self, qpos: FloatArray | None = None) -> FloatArray:
+        """(..., N) headings wrapped to (-pi, pi]."""
+        return wrap_angle(self.yaw_rad(qpos))
 
     def substep_positions_m(self) -> FloatArray:
         """(substeps, N, 2) positions after every substep of the last `step` call."""
-        return self.substep_qpos[:, self._qxy]
+        return self.positions_m(self.substep_qpos)
 
-    def velocities_mps(self) -> FloatArray:
-        return self.data.ptr.qvel[self._vxy]
+    def velocities_mps(self, qvel: FloatArray | None = None) -> FloatArray:
+        """(..., N, 2) velocities over ground."""
+        return (self.data.ptr.qvel if qvel is None else qvel)[..., self._vxy]
 
-    def speeds_mps(self) -> FloatArray:
-        """Measured speed over ground."""
-        return norm_xy(self.velocities_mps())
+    def speeds_mps(self, qvel: FloatArray | None = None) -> FloatArray:
+        """(..., N) measured speeds over ground."""
+        return norm_xy(self.velocities_mps(qvel))
 
     def surge_mps(self) -> FloatArray:
         """Measured speed along the hull axis."""
@@ -155,12 +159,12 @@ class AUVPhysics(engine.Physics):
         if self._stepper.step([self], nstep)[0]:
             raise PhysicsError(DIVERGED)
 
-    def meter(self, state: FloatArray, sensordata: FloatArray) -> None:
-        """Book one rollout of this physics: (substeps, nstate) states and sensor data."""
-        force = sensordata[:, self._power_sensors[..., 0]]
-        velocity = sensordata[:, self._power_sensors[..., 1]]
-        self.mech_energy_j += np.abs(force * velocity).sum(axis=0) * self.dt_s
-        self.substep_qpos = state[:, 1 : 1 + self.model.ptr.nq]
+    def actuator_work_j(self, sensordata: FloatArray) -> FloatArray:
+        """(..., N, 2) integral of |force x velocity| of each AUV's thrust and yaw actuators
+        over recorded (..., substeps, nsensordata) sensor data."""
+        force = sensordata[..., self._power_sensors[..., 0]]
+        velocity = sensordata[..., self._power_sensors[..., 1]]
+        return np.abs(force * velocity).sum(axis=-3) * self.dt_s
 
     def __getstate__(self) -> Any:
         raise TypeError("AUVPhysics is not picklable; pickle the environment (it rebuilds).")
@@ -226,9 +230,12 @@ class Stepper:
         diverged = ~np.isfinite(state[:, -1]).all(axis=1) | (
             np.abs(state[:, -1, 0] - end_s) > 0.5 * m.opt.timestep
         )
+        work_j = physics[0].actuator_work_j(sensordata)  # same sensor layout for all
+        nq = m.nq
         for i, p in enumerate(physics):
             mujoco.mj_setState(models[i], p.data.ptr, state[i, -1], _STATE_SPEC)
-            p.meter(state[i], sensordata[i])
+            p.mech_energy_j += work_j[i]
+            p.substep_qpos = state[i, :, 1 : 1 + nq]
         return diverged
 
     def close(self) -> None:

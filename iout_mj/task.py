@@ -38,18 +38,21 @@ def command(mission: Mission, physics: Sequence[AUVPhysics], action: Any) -> np.
 def book(mission: Mission, physics: Sequence[AUVPhysics], meters_before_j: np.ndarray) -> Any:
     """Book the slot the vehicles have just flown (measured state and energy); returns the
     reward (per environment)."""
-    b, n = mission.batch, mission.n_auvs
-    mech = (np.stack([p.mech_energy_j for p in physics]) - meters_before_j) / (
-        mission.cfg.motion.prop_efficiency
-    )
-    path = np.stack([p.substep_positions_m() for p in physics], axis=1)
+    b, layout = mission.batch, physics[0]  # every physics of the batch has one layout
+    qpos = np.stack([p.data.ptr.qpos for p in physics]).reshape(*b, -1)
+    qvel = np.stack([p.data.ptr.qvel for p in physics]).reshape(*b, -1)
+    path = np.stack([p.substep_qpos for p in physics], axis=1)
+    mech = (
+        np.stack([p.mech_energy_j for p in physics]).reshape(*b, -1, 2)
+        - meters_before_j.reshape(*b, -1, 2)
+    ) / (mission.cfg.motion.prop_efficiency)
     return mission.end_slot(
-        np.stack([p.positions_m() for p in physics]).reshape(*b, n, 2),
-        np.stack([p.headings_rad() for p in physics]).reshape(*b, n),
-        np.stack([p.speeds_mps() for p in physics]).reshape(*b, n),
-        mech[..., 0].reshape(*b, n),
-        mech[..., 1].reshape(*b, n),
-        path.reshape(len(path), *b, n, 2),
+        layout.positions_m(qpos),
+        layout.headings_rad(qpos),
+        layout.speeds_mps(qvel),
+        mech[..., 0],
+        mech[..., 1],
+        layout.positions_m(path.reshape(len(path), *b, -1)),
     )
 
 

@@ -46,7 +46,7 @@ def _mission_maneuver() -> Maneuver:
     env = KinematicEnvironment(make_config(1, 7), seed=0)
     policy = make_policy("planner")
     env.reset()
-    start = env.mission.positions_m[0]
+    start = env.mission.positions_m[0].copy()
     start_heading = float(np.degrees(env.mission.heading_sp[0]))
     headings, speeds = [], []
     while True:

@@ -136,3 +136,10 @@ def test_fence_at_area_edges():
     p.set_commands(np.array([np.pi]), np.array([3.0]))
     p.step(500)
     assert p.positions_m()[0, 0] == pytest.approx(0.0, abs=0.5)
+
+
+def test_mission_maneuver_starts_where_its_episode_started():
+    (man,) = [m for m in maneuvers() if m.name.startswith("mission")]
+    offset = np.array(man.start_m) - np.array(CFG1.scenario.starts_m[0])
+    assert np.all(np.abs(offset) <= CFG1.scenario.start_jitter_m)  # not where it ended
+    assert len(man.speed_mps) > 10
