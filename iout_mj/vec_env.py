@@ -39,16 +39,22 @@ ConfigLike = Config | dict[str, Any] | str | Path | None
 
 
 class MissionVecEnv(VecEnv):
-    """A batched Mission behind the VecEnv interface; subclasses move the vehicles."""
+    """A batched Mission behind the VecEnv interface; subclasses move the vehicles.
+
+    Args:
+        n_envs: B, the number of environments.
+        n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
+        seed: seeds the one RNG of the batch (also `venv.seed(s)` before `reset()`).
+    """
 
     def __init__(
         self,
         n_envs: int,
-        n_auvs: int | None,
-        n_nodes: int | None,
-        layout: str,
-        config: ConfigLike,
-        seed: int | None,
+        n_auvs: int | None = None,
+        n_nodes: int | None = None,
+        layout: str = "paper",
+        config: ConfigLike = None,
+        seed: int | None = None,
     ):
         if not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
             raise ValueError(f"n_envs={n_envs!r} is invalid: accepted an integer >= 1")
@@ -63,6 +69,7 @@ class MissionVecEnv(VecEnv):
             gym.spaces.MultiDiscrete(self.mission.action_high.copy()),
         )
         self._actions: Any = None
+        self._none_failed = np.zeros(self.num_envs, dtype=bool)
 
     # ------------------------------------------------------------------ subclass hooks
     def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -139,35 +146,17 @@ class MissionVecEnv(VecEnv):
 
 
 class KinematicVecEnv(MissionVecEnv):
-    """B kinematic environments stepped together; spaces as `iout_mj/MultiAUV-v0`.
-
-    Args:
-        n_envs: B, the number of environments.
-        n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
-        seed: seeds the one RNG of the batch (also `venv.seed(s)` before `reset()`).
-    """
-
-    def __init__(
-        self,
-        n_envs: int,
-        n_auvs: int | None = None,
-        n_nodes: int | None = None,
-        layout: str = "paper",
-        config: ConfigLike = None,
-        seed: int | None = None,
-    ):
-        super().__init__(n_envs, n_auvs, n_nodes, layout, config, seed)
-        self._ok = np.zeros(n_envs, dtype=bool)
+    """B kinematic environments stepped together; spaces as `iout_mj/MultiAUV-v0`."""
 
     def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        return move(self.mission, actions), self._ok
+        return move(self.mission, actions), self._none_failed
 
 
 class PhysicsVecEnv(MissionVecEnv):
     """B MuJoCo environments stepped together; spaces as `iout_mj/MultiAUV-v0`.
 
     Args:
-        n_envs, n_auvs, n_nodes, layout, config, seed: as for `KinematicVecEnv`.
+        n_envs, n_auvs, n_nodes, layout, config, seed: as for `MissionVecEnv`.
         nthread: C threads of the rollout (0: the calling thread; at most one per core helps).
     """
 
