@@ -394,3 +394,40 @@ def format_table(r: dict[str, Any]) -> str:
         f"with {mem['training_envs']} envs (one process) {mem['training_mb']:.0f} MB"
     )
     return "\n".join(lines)
+
+
+def format_markdown(r: dict[str, Any]) -> str:
+    """The README's table of one run."""
+    b = f"batch_{PHYSICS_BATCH}_"
+    rows = ["| benchmark | value | target |", "| --- | --- | --- |"]
+    for key, v in r["slot_vs_raw"].items():
+        rows.append(
+            f"| slot_vs_raw {key}, one env (env {v['env_steps_per_s']:.0f} / raw "
+            f"{v['raw_slots_per_s']:.0f} slots/s) | {v['ratio']:.3f} | >= 0.9 |"
+        )
+        rows.append(
+            f"| slot_vs_raw {key}, PhysicsVecEnv of {PHYSICS_BATCH} on one thread (env "
+            f"{v[b + 'env_steps_per_s']:.0f} / raw {v[b + 'raw_slots_per_s']:.0f}) "
+            f"| {v[b + 'ratio']:.3f} | >= 0.9 |"
+        )
+    single = r["kinematic_single_env_steps_per_s"]
+    for key, v in r["kinematic_steps_per_s"].items():
+        target = ">= 15,000" if key == "N2_K13" else ""
+        rows.append(
+            f"| kinematic_steps_per_s {key}, KinematicVecEnv of {r['kinematic_batch']} "
+            f"[one env] | {v:,.0f} [{single[key]:,.0f}] | {target} |"
+        )
+    p, mem = r["ppo_fps"], r["memory"]
+    rows += [
+        f"| ppo_fps_ratio (physics {p['physics']:.0f} / trivial {p['trivial']:.0f} steps/s; "
+        f"kinematic {p['kinematic']:.0f}) | {r['ppo_fps_ratio']:.3f} | >= 0.6 |",
+        f"| subproc_scaling (2 worker processes / 1) | {r['subproc_scaling']:.3f} | >= 1.8 |",
+        f"| thread_scaling (PhysicsVecEnv, 2 rollout threads / 1) | {r['thread_scaling']:.3f} | |",
+        f"| render_fps 640x480 (top-down + chase, trails, links, overlay) | "
+        f"{r['render_fps']:.1f} | |",
+        f"| peak resident memory, one MuJoCo env (N=2, K=7) | {mem['one_env_mb']:.0f} MB "
+        "| < 200 MB |",
+        f"| peak resident memory, PPO on the MuJoCo backend, {mem['training_envs']} envs in one "
+        f"process | {mem['training_mb']:.0f} MB | |",
+    ]
+    return "\n".join(rows)

@@ -188,12 +188,18 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from iout_mj.bench import format_table, run_all
+    from iout_mj.bench import format_markdown, format_table, run_all
 
-    result = run_all(quick=args.quick)
+    if args.from_json:
+        result = json.loads(Path(args.from_json).read_text())
+    else:
+        result = run_all(quick=args.quick)
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
-    print(json.dumps(result, indent=2) if args.json else format_table(result))
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_markdown(result) if args.markdown else format_table(result))
     return 0
 
 
@@ -274,6 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test)")
     p.add_argument("--out", help="also write the JSON here")
+    p.add_argument("--markdown", action="store_true", help="the README's table")
+    p.add_argument("--from-json", help="format a saved run instead of measuring")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("figures", help="the paper's figures from saved evaluation results")

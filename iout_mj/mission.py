@@ -146,11 +146,8 @@ class Mission:
         self.log = MissionLog()
 
     # ------------------------------------------------------------------ episode
-    def reset(
-        self, rng: np.random.RandomState, mask: NDArray[np.bool_] | None = None
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Start an episode in every environment (mask None) or in those where `mask` is True;
-        returns the start positions (*batch, N, 2), headings and speeds of every environment.
+    def reset(self, rng: np.random.RandomState, mask: NDArray[np.bool_] | None = None) -> None:
+        """Start an episode in every environment (mask None) or in those where `mask` is True.
 
         Random draws, in this order: node layouts (if random per episode), position jitter,
         heading jitter, current jitter; one row per restarted environment.
@@ -205,7 +202,6 @@ class Mission:
         if not self.batch:
             self.log = MissionLog()
             self._log_slot(self.network.mean_aoi, self.network.jain)
-        return self.positions_m, self.headings_rad, self.speeds_mps
 
     # ------------------------------------------------------------------ actions
     def decode(self, action: Any) -> NDArray[np.int64]:

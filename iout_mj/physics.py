@@ -1,9 +1,10 @@
 """dm_control Physics for N AUVs: named accessors, commands, and exact actuator-power metering.
 
-`step(nstep)` runs all substeps in C through `mujoco.rollout` (no Python per substep) and
-keeps each substep's sensor data, so the mechanical power |force x velocity| of every
-actuator is integrated over every substep. The same call leaves the substep trajectory
-(`substep_qpos`) for smooth video frames.
+`Stepper` advances one or several AUVPhysics in one `mujoco.rollout` call (all substeps in C,
+no Python per substep; several scenes share C threads) and keeps every substep's state and
+sensor data, so the mechanical power |force x velocity| of every actuator is integrated over
+every substep, and the substep trajectory (`substep_qpos`) is there for smooth video frames
+and the separation metrics. `AUVPhysics.step` is the Stepper on one scene.
 """
 
 from __future__ import annotations
@@ -93,6 +94,7 @@ class AUVPhysics(engine.Physics):
         self.mech_energy_j = np.zeros((n, 2))
         """Integrated |force x velocity| per AUV: column 0 surge thrust, column 1 yaw."""
         self.substep_qpos: FloatArray = np.zeros((0, m.nq))
+        """(substeps, nq) qpos after every substep of the last step (until the next one)."""
 
     # ------------------------------------------------------------------ accessors
     # Each reads this physics' state, or the same fields of given qpos / qvel arrays with any
@@ -189,7 +191,9 @@ class Stepper:
         self.nthread = nthread
         self._rollout = rollout.Rollout(nthread=nthread)
         self._scratch: list[mujoco.MjData] = []
-        self._buffers: dict[tuple[int, int], tuple[FloatArray, ...]] = {}
+        self._buffers: dict[tuple[int, int], tuple[FloatArray, ...]] = {}  # for the last shape
+        self.inputs: tuple[FloatArray, ...] = ()
+        """Start states (B, nstate) and controls (B, nstep, nu) of the last step."""
 
     def step(self, physics: Sequence[AUVPhysics], nstep: int) -> NDArray[np.bool_]:
         """Advance every physics `nstep` substeps; returns which of them diverged (MuJoCo
@@ -211,7 +215,6 @@ class Stepper:
             }
         state0, ctrl, state, sensordata = self._buffers[key]
         self.inputs = (state0, ctrl)
-        """Start states (B, nstate) and controls (B, nstep, nu) of the last step."""
         for i, p in enumerate(physics):
             mujoco.mj_getState(models[i], p.data.ptr, state0[i], _STATE_SPEC)
             ctrl[i] = p.data.ptr.ctrl
@@ -235,7 +238,7 @@ class Stepper:
         for i, p in enumerate(physics):
             mujoco.mj_setState(models[i], p.data.ptr, state[i, -1], _STATE_SPEC)
             p.mech_energy_j += work_j[i]
-            p.substep_qpos = state[i, :, 1 : 1 + nq]
+            p.substep_qpos = state[i, :, 1 : 1 + nq]  # a view: valid until the next step
         return diverged
 
     def close(self) -> None:

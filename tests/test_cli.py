@@ -3,11 +3,14 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from iout_mj import acoustics
 from iout_mj.config import AcousticsConfig
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def run(*args, check=True):
@@ -98,3 +101,13 @@ def test_bench_quick_json_has_every_measure():
     assert 0 < row["ratio"] < 2 and 0 < row["batch_8_ratio"] < 2
     assert r["substeps_per_slot"] * r["timestep_s"] == pytest.approx(25.0)
     assert r["kinematic_steps_per_s"]["N2_K13"] > r["kinematic_single_env_steps_per_s"]["N2_K13"]
+
+
+def test_bench_formats_the_saved_run_as_the_readme_table():
+    saved_run = ROOT / "benchmarks" / "results-2cpu.json"
+    out = run("bench", "--from-json", str(saved_run), "--markdown").stdout
+    kin = json.loads(saved_run.read_text())["kinematic_steps_per_s"]["N2_K13"]
+    assert f"| kinematic_steps_per_s N2_K13, KinematicVecEnv of 64 [one env] | {kin:,.0f}" in out
+    assert out in (ROOT / "README.md").read_text()  # the README shows this very run
+    bad = run("bench", "--from-json", "missing.json", check=False)
+    assert bad.returncode == 2 and "missing.json" in bad.stderr
