@@ -150,3 +150,17 @@ def test_aoi_booked_after_an_early_end_matches_slot_by_slot_ageing(cfg):
             total += ages.mean()
         expected.append(total)
     np.testing.assert_allclose(m._unserved_aoi_sum(), expected)
+
+
+def test_physics_batch_places_each_envs_own_layout_and_current(cfg):
+    phys = dataclasses.replace(cfg.physics, current_jitter_mps=0.2)
+    venv = PhysicsVecEnv(2, n_nodes=9, layout="random", config=cfg.replace(physics=phys), seed=3)
+    venv.reset()
+    m = venv.mission
+    assert not np.array_equal(m.network.nodes_m[0], m.network.nodes_m[1])
+    for e, p in enumerate(venv.physics):
+        np.testing.assert_array_equal(p.model.ptr.body_pos[p._nodes, :2], m.network.nodes_m[e])
+        np.testing.assert_array_equal(p.model.ptr.opt.wind[:2], m.current_mps[e])
+        np.testing.assert_allclose(p.positions_m(), m.positions_m[e])
+    assert not np.array_equal(m.current_mps[0], m.current_mps[1])
+    venv.close()
