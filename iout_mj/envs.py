@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium.utils import EzPickle
 
 from iout_mj.config import Config, ConfigError, make_config
-from iout_mj.mission import OBS_HIGH, OBS_LOW, OBSERVATION_DOC
+from iout_mj.mission import OBS_HIGH, OBS_LOW, OBSERVATION_DOC, flatten_observation
 
 ENV_ID = "iout_mj/MultiAUV-v0"
 BACKENDS = ("mujoco", "kinematic")
@@ -118,9 +118,6 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         """The AUVPhysics of the MuJoCo backend (None for the kinematic one)."""
         return getattr(self._env, "physics", None)
 
-    def _flatten(self, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return np.concatenate(list(obs.values()), dtype=np.float32)
-
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
@@ -129,7 +126,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
             target = self._env.task if self.backend == "mujoco" else self._env
             target.reseed(seed)
         ts = self._env.reset()
-        self._last_obs = self._flatten(ts.observation)
+        self._last_obs = flatten_observation(ts.observation)
         if self._renderer is not None:
             self._renderer.reset()
         return self._last_obs.copy(), {"slot": 0}
@@ -144,7 +141,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
                 "slot": int(self.mission.slot),
             }
             return self._last_obs.copy(), 0.0, True, False, info
-        obs = self._flatten(ts.observation)
+        obs = flatten_observation(ts.observation)
         if not np.all(np.isfinite(obs)):
             info = {
                 "error": "non-finite observation (diverged state)",

@@ -20,8 +20,8 @@ from iout_mj.config import Config
 from iout_mj.geometry import norm_xy, wrap_angle
 from iout_mj.mission import Mission
 
-PATH_SAMPLES = 5
-"""Points along each straight slot move at which separations are checked."""
+PATH_FRACTIONS = np.linspace(0.0, 1.0, 6)[1:]
+"""Points along each straight slot move (fractions of it) at which separations are checked."""
 
 
 def move(m: Mission, action: Any) -> Any:
@@ -30,11 +30,11 @@ def move(m: Mission, action: Any) -> Any:
     heading, speed = m.begin_slot(action)
     end = np.where(m.boundary_attempt[..., None], start, m.straight_end_m)
     prop = energy.travel_energy_j(speed, norm_xy(end - start), m.cfg.motion)
-    fraction = np.linspace(0.0, 1.0, PATH_SAMPLES + 1)[1:].reshape(-1, *[1] * end.ndim)
+    fraction = PATH_FRACTIONS.reshape(-1, *[1] * end.ndim)
     return m.end_slot(
         end,
         wrap_angle(heading),
-        speed.copy(),
+        speed,
         prop,
         np.zeros_like(prop),
         start + fraction * (end - start),

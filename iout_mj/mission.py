@@ -453,7 +453,7 @@ class Mission:
 
     def flat_observation(self) -> NDArray[np.float32]:
         """`observation()` concatenated in its documented order, as float32 (*batch, D)."""
-        return np.concatenate(list(self.observation().values()), axis=-1, dtype=np.float32)
+        return flatten_observation(self.observation())
 
     def observation_sizes(self) -> dict[str, int]:
         n, k = self.n_auvs, self.n_nodes
@@ -468,6 +468,11 @@ class Mission:
             "dock_distance": n,
             "time_remaining": 1,
         }
+
+
+def flatten_observation(obs: dict[str, FloatArray]) -> NDArray[np.float32]:
+    """An observation dict concatenated in its (documented) order, as float32 (..., D)."""
+    return np.concatenate(list(obs.values()), axis=-1, dtype=np.float32)
 
 
 OBSERVATION_DOC = """\

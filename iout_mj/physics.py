@@ -191,7 +191,8 @@ class Stepper:
         self.nthread = nthread
         self._rollout = rollout.Rollout(nthread=nthread)
         self._scratch: list[mujoco.MjData] = []
-        self._buffers: dict[tuple[int, int], tuple[FloatArray, ...]] = {}  # for the last shape
+        self._shape = (0, 0)  # (scenes, nstep) the buffers below are sized for
+        self._buffers: tuple[FloatArray, ...] = ()
         self.inputs: tuple[FloatArray, ...] = ()
         """Start states (B, nstate) and controls (B, nstep, nu) of the last step."""
 
@@ -202,18 +203,15 @@ class Stepper:
         m = models[0]
         if not self._scratch:  # one workspace per thread; each physics keeps its own data
             self._scratch = [mujoco.MjData(m) for _ in range(max(self.nthread, 1))]
-        key = (len(physics), nstep)
-        if key not in self._buffers:
-            nstate = mujoco.mj_stateSize(m, _STATE_SPEC)
-            self._buffers = {
-                key: (
-                    np.empty((len(physics), nstate)),
-                    np.empty((len(physics), nstep, m.nu)),
-                    np.empty((len(physics), nstep, nstate)),
-                    np.empty((len(physics), nstep, m.nsensordata)),
-                )
-            }
-        state0, ctrl, state, sensordata = self._buffers[key]
+        if self._shape != (len(physics), nstep):
+            self._shape, nstate = (len(physics), nstep), mujoco.mj_stateSize(m, _STATE_SPEC)
+            self._buffers = (
+                np.empty((len(physics), nstate)),
+                np.empty((len(physics), nstep, m.nu)),
+                np.empty((len(physics), nstep, nstate)),
+                np.empty((len(physics), nstep, m.nsensordata)),
+            )
+        state0, ctrl, state, sensordata = self._buffers
         self.inputs = (state0, ctrl)
         for i, p in enumerate(physics):
             mujoco.mj_getState(models[i], p.data.ptr, state0[i], _STATE_SPEC)
@@ -229,7 +227,7 @@ class Stepper:
             sensordata=sensordata,
         )
         # A MuJoCo auto-reset (bad qpos/qvel/qacc) restarts the clock: the slot's end time shows it.
-        end_s = state0[:, 0] + nstep * np.array([mm.opt.timestep for mm in models])
+        end_s = state0[:, 0] + nstep * m.opt.timestep  # one config: one timestep
         diverged = ~np.isfinite(state[:, -1]).all(axis=1) | (
             np.abs(state[:, -1, 0] - end_s) > 0.5 * m.opt.timestep
         )
