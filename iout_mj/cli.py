@@ -1,4 +1,5 @@
-"""`iout-mj` command line: link-budget, validate-energy, mission, evaluate, figures."""
+"""`iout-mj` command line: link-budget, validate-energy, mission, render, evaluate, figures,
+train, bench."""
 
 from __future__ import annotations
 
@@ -10,6 +11,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from iout_mj.agents.baselines import POLICIES
+from iout_mj.agents.policies import shipped_policies
+from iout_mj.config import Config
+from iout_mj.envs import BACKENDS
+from iout_mj.experiments import bench, bench_report, energy_validation, evaluate, figures
+from iout_mj.experiments.mission import run_mission
+from iout_mj.scenarios import fixed_config
+from iout_mj.schema import ConfigError
+from iout_mj.training import TrainConfig, train
+from iout_mj.world import acoustics
 
 
 def _positive_float(text: str) -> float:
@@ -24,15 +36,11 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _load_config(path: str | None) -> Any:
-    from iout_mj.config import Config
-
+def _load_config(path: str | None) -> Config:
     return Config.load(path) if path else Config()
 
 
 def cmd_link_budget(args: argparse.Namespace) -> int:
-    from iout_mj import acoustics
-
     cfg = _load_config(args.config).acoustics
     d = np.asarray(args.distance, dtype=float)
     rows = [
@@ -73,24 +81,19 @@ def cmd_link_budget(args: argparse.Namespace) -> int:
 
 
 def cmd_validate_energy(args: argparse.Namespace) -> int:
-    from iout_mj.config import make_config
-    from iout_mj.validation import format_table, validate
-
-    cfg = make_config(1, 7, base=_load_config(args.config))
+    cfg = fixed_config(1, 7, _load_config(args.config))
     figure = Path(args.out) / "energy_validation.png"
-    result = validate(cfg, figure=figure)
+    result = energy_validation.validate(cfg, figure=figure)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(format_table(result))
+        print(energy_validation.format_table(result))
         print(f"\nfigure: {figure}")
     return 0
 
 
 def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) -> dict[str, Any]:
     """run_mission with the arguments of `_mission_arguments`, checked."""
-    from iout_mj.missions import run_mission
-
     for flag, value, low in (
         ("width", args.width, 16),
         ("height", args.height, 16),
@@ -131,9 +134,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from iout_mj.evaluation import evaluate, format_table, save
-
-    rows, episodes = evaluate(
+    rows, episodes = evaluate.evaluate(
         args.policy,
         args.n_auvs,
         args.nodes,
@@ -143,34 +144,30 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     if args.out:
-        save(rows, episodes, Path(args.out))
+        evaluate.save(rows, episodes, Path(args.out))
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
-        print(format_table(rows))
+        print(evaluate.format_table(rows))
         if args.out:
             print(f"\nsaved: {Path(args.out) / 'results.csv'} and results.json")
     return 0
 
 
 def cmd_figures(args: argparse.Namespace) -> int:
-    from iout_mj.figures import figures_from_results, training_curves
-
     if not args.results and not args.runs:
         raise ValueError("figures: give --results DIR and/or --runs RUN [RUN ...]")
     out = Path(args.out or args.results or "renders")
     if args.results:
-        for path in figures_from_results(Path(args.results), out):
+        for path in figures.figures_from_results(Path(args.results), out):
             print(path)
     if args.runs:
         out.mkdir(parents=True, exist_ok=True)
-        print(training_curves([Path(r) for r in args.runs], out / "training_curves.png"))
+        print(figures.training_curves([Path(r) for r in args.runs], out / "training_curves.png"))
     return 0
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from iout_mj.training import TrainConfig, train
-
     cfg = TrainConfig.load(args.config)
     out = Path(args.out or f"runs/{cfg.name}")
     state = train(cfg, out, resume=args.resume)
@@ -188,18 +185,16 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from iout_mj.bench import format_markdown, format_table, run_all
-
     if args.from_json:
         result = json.loads(Path(args.from_json).read_text())
     else:
-        result = run_all(quick=args.quick)
+        result = bench.run_all(quick=args.quick)
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(format_markdown(result) if args.markdown else format_table(result))
+        print(bench_report.format_markdown(result) if args.markdown else bench_report.format_table(result))
     return 0
 
 
@@ -207,11 +202,11 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
     p.add_argument(
         "--policy",
         default="planner",
-        help="greedy, round-robin, random-walk, planner, ppo-n1-k7, ppo-n2-k7 or a file",
+        help=f"{', '.join(POLICIES)}, {', '.join(shipped_policies())} or a policy folder",
     )
     p.add_argument("--n-auvs", type=int, default=2)
     p.add_argument("--nodes", type=int, default=7)
-    p.add_argument("--backend", choices=["mujoco", "kinematic"], default="mujoco")
+    p.add_argument("--backend", choices=BACKENDS, default="mujoco")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--slots", type=int, default=None, help="stop after this many slots")
     p.add_argument("--width", type=int, default=width)
@@ -264,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nodes", type=int, nargs="+", default=[7])
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--seed", type=int, default=0, help="episode e uses seed S + e")
-    p.add_argument("--backend", choices=["mujoco", "kinematic"], default="mujoco")
+    p.add_argument("--backend", choices=BACKENDS, default="mujoco")
     p.add_argument("--workers", type=int, default=None, help="processes (default: cores)")
     p.add_argument("--json", action="store_true")
     p.add_argument("--out", help="folder for results.csv / results.json / traces.json")
@@ -293,8 +288,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from iout_mj.config import ConfigError
-
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

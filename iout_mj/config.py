@@ -1,18 +1,25 @@
-"""Typed, frozen configuration: paper defaults, presets, validation, YAML/JSON load and save."""
+"""Typed, frozen configuration of a mission, with the paper's defaults and their sources."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 import math
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
+
+from iout_mj.schema import (
+    ConfigError,
+    build_dataclass,
+    fraction,
+    load_mapping,
+    positive,
+    require,
+    to_plain,
+)
 
 Point = tuple[float, float]
 
@@ -41,27 +48,6 @@ MAX_AUVS = 4
 MIN_NODES, MAX_NODES = 2, 30
 
 
-class ConfigError(ValueError):
-    """A configuration value, key or file is invalid; the message says what is accepted."""
-
-
-def _require(ok: bool, name: str, value: Any, accepted: str) -> None:
-    if not ok:
-        raise ConfigError(f"{name}={value!r} is invalid: accepted {accepted}")
-
-
-def _positive(obj: Any, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        _require(math.isfinite(value) and value > 0, name, value, "a finite number > 0")
-
-
-def _fraction(obj: Any, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        _require(0 < value <= 1, name, value, "a number in (0, 1]")
-
-
 @dataclass(frozen=True)
 class MotionConfig:
     """Vehicle motion and propulsion (paper Table I, plus battery from the authors' code)."""
@@ -81,7 +67,7 @@ class MotionConfig:
     battery_j: float = 2.0e6
 
     def __post_init__(self) -> None:
-        _positive(
+        positive(
             self,
             "v_max_mps",
             "drag_coefficient",
@@ -91,17 +77,17 @@ class MotionConfig:
             "dv_max_mps",
             "battery_j",
         )
-        _fraction(self, "prop_efficiency")
-        _require(self.hotel_power_w >= 0, "hotel_power_w", self.hotel_power_w, "a number >= 0")
+        fraction(self, "prop_efficiency")
+        require(self.hotel_power_w >= 0, "hotel_power_w", self.hotel_power_w, "a number >= 0")
         for name in ("heading_levels", "speed_levels"):
             value = getattr(self, name)
-            _require(
+            require(
                 value >= 3 and value % 2 == 1,
                 name,
                 value,
                 "an odd integer >= 3 (so that the middle level is 'no change')",
             )
-        _require(
+        require(
             0 <= self.initial_speed_mps <= self.v_max_mps,
             "initial_speed_mps",
             self.initial_speed_mps,
@@ -145,7 +131,7 @@ class AcousticsConfig:
     """Wenz model surface wind speed."""
 
     def __post_init__(self) -> None:
-        _positive(
+        positive(
             self,
             "f_wet_khz",
             "f_data_khz",
@@ -157,21 +143,21 @@ class AcousticsConfig:
             "charging_s",
             "data_s",
         )
-        _fraction(self, "eta_tx", "eta_harv")
-        _require(self.n_hydrophones >= 1, "n_hydrophones", self.n_hydrophones, "an integer >= 1")
-        _require(
+        fraction(self, "eta_tx", "eta_harv")
+        require(self.n_hydrophones >= 1, "n_hydrophones", self.n_hydrophones, "an integer >= 1")
+        require(
             self.noise_model in ("flat", "wenz"),
             "noise_model",
             self.noise_model,
             "'flat' or 'wenz'",
         )
-        _require(
+        require(
             0 <= self.shipping_activity <= 1,
             "shipping_activity",
             self.shipping_activity,
             "a number in [0, 1]",
         )
-        _require(self.wind_speed_mps >= 0, "wind_speed_mps", self.wind_speed_mps, "a number >= 0")
+        require(self.wind_speed_mps >= 0, "wind_speed_mps", self.wind_speed_mps, "a number >= 0")
 
 
 @dataclass(frozen=True)
@@ -183,9 +169,9 @@ class NetworkConfig:
     node_initial_energy_j: float = 0.1
 
     def __post_init__(self) -> None:
-        _require(self.k_reset >= 1, "k_reset", self.k_reset, "an integer >= 1")
-        _require(self.aoi_max >= 1, "aoi_max", self.aoi_max, "a number >= 1")
-        _require(
+        require(self.k_reset >= 1, "k_reset", self.k_reset, "an integer >= 1")
+        require(self.aoi_max >= 1, "aoi_max", self.aoi_max, "a number >= 1")
+        require(
             self.node_initial_energy_j >= 0,
             "node_initial_energy_j",
             self.node_initial_energy_j,
@@ -194,34 +180,59 @@ class NetworkConfig:
 
 
 @dataclass(frozen=True)
-class RewardConfig:
-    """Weights of the paper's reward equation; values from the authors' code except where noted."""
+class RewardWeights:
+    """Signed scale of each reward term (`mission.rewards`): reward = sum of weight x quantity.
 
-    docking_progress_per_m: float = 0.02
-    """alpha_g; the paper gives no value: 0.02 makes a full approach worth about 22."""
-    aoi: float = 0.1
-    fairness: float = 2.0
+    Values from the authors' code except where noted; a negative weight is a cost.
+    """
+
+    docking_progress: float = 0.02
+    """alpha_g, per metre closer to the dock; the paper gives no value: 0.02 makes a full
+    approach worth about 22."""
+    aoi: float = -0.1
+    """Per unit of mean AoI, every slot (and for the unserved slots after an early end)."""
+    fairness: float = -2.0
+    """Per unit of (1 - Jain's index)."""
+    boundary: float = -20.0
+    """Per AUV whose move would leave the area."""
+    stall: float = -1.0
+    """Per active AUV that moved less than `stall_distance_m`."""
+    energy_margin: float = 2.0
+    """Shared by the AUVs: tanh of the uplink energy margin of the node each collects from."""
+    infeasible_uplink: float = -0.02
+    """Per active AUV whose uplink node cannot afford the transmission."""
+    collision: float = -4.0
+    """alpha_c, per pair: the Gaussian margin penalty below d_th."""
+    dock_first_entry: float = 60.0
+    """Per AUV, the slot it first enters the dock."""
+    dock_all: float = 10.0
+    """Once, the slot the last AUV docks."""
+    deadline: float = 0.1
+    """Deadline shaping (ours), per metre of the potential -max(0, d_dock - v_ref t_left)."""
+    undocked_at_end: float = -100.0
+    """Per AUV not docked when the episode ends: the terminal constraint (12a), l_n(T) in G,
+    as a reward term (the paper states it as a constraint; the value is ours)."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            require(math.isfinite(value), f.name, value, "a finite number")
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """The reward: signed term weights apart from the thresholds the terms use."""
+
+    weights: RewardWeights = field(default_factory=RewardWeights)
     fairness_min_deliveries: int = 3
     """The fairness term applies once more than this many deliveries happened."""
-    boundary: float = 20.0
-    stall: float = 1.0
     stall_distance_m: float = 5.0
     """A slot with less displacement than this (and not docked) counts as a stall."""
-    energy_margin: float = 2.0
     margin_epsilon_j: float = 1e-6
-    infeasible_uplink: float = 0.02
-    collision: float = 4.0
-    """alpha_c."""
+    """Regularises the relative energy margin (stored - need) / (need + epsilon)."""
     collision_sigma_m: float = 20.0
     safety_distance_m: float = 100.0
     """d_th."""
-    dock_first_entry: float = 60.0
-    dock_all: float = 10.0
-    undocked_at_end: float = 100.0
-    """Penalty per AUV not docked when the episode ends: the terminal constraint (12a),
-    l_n(T) in G, as a reward term (the paper states it as a constraint; the value is ours)."""
-    deadline_per_m: float = 0.1
-    """Deadline shaping (ours): potential -max(0, d_dock - v_ref * time left) per AUV."""
     deadline_speed_mps: float = 2.0
     """v_ref of the deadline shaping: the speed at which the dock is still reachable in time."""
     fairness_lambda: float = 1.0
@@ -229,9 +240,12 @@ class RewardConfig:
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            _require(math.isfinite(value) and value >= 0, f.name, value, "a finite number >= 0")
-        _positive(self, "collision_sigma_m", "margin_epsilon_j")
+            if f.name != "weights":
+                value = getattr(self, f.name)
+                require(
+                    math.isfinite(value) and value >= 0, f.name, value, "a finite number >= 0"
+                )
+        positive(self, "collision_sigma_m", "margin_epsilon_j")
 
 
 @dataclass(frozen=True)
@@ -246,8 +260,8 @@ class PhysicsConfig:
     """Per-episode random current of up to this speed, drawn from the task RNG."""
 
     def __post_init__(self) -> None:
-        _require(0 < self.timestep_s <= 0.5, "timestep_s", self.timestep_s, "a number in (0, 0.5]")
-        _require(
+        require(0 < self.timestep_s <= 0.5, "timestep_s", self.timestep_s, "a number in (0, 0.5]")
+        require(
             self.current_jitter_mps >= 0,
             "current_jitter_mps",
             self.current_jitter_mps,
@@ -275,29 +289,29 @@ class ScenarioConfig:
 
     def __post_init__(self) -> None:
         ax, ay = self.area_m
-        _require(ax > 0 and ay > 0, "area_m", self.area_m, "two sides > 0 m")
-        _require(
+        require(ax > 0 and ay > 0, "area_m", self.area_m, "two sides > 0 m")
+        require(
             1 <= self.n_auvs <= MAX_AUVS, "n_auvs", self.n_auvs, f"an integer from 1 to {MAX_AUVS}"
         )
         k = len(self.nodes_m)
-        _require(
+        require(
             MIN_NODES <= k <= MAX_NODES,
             "nodes_m",
             f"{k} nodes",
             f"{MIN_NODES} to {MAX_NODES} nodes",
         )
         for i, (x, y) in enumerate(self.nodes_m):
-            _require(
+            require(
                 0 <= x <= ax and 0 <= y <= ay, f"nodes_m[{i}]", (x, y), "a point inside area_m"
             )
-        _require(
+        require(
             len(self.starts_m) >= self.n_auvs,
             "starts_m",
             self.starts_m,
             f"at least n_auvs={self.n_auvs} points",
         )
         for i, (x, y) in enumerate(self.starts_m[: self.n_auvs]):
-            _require(
+            require(
                 0 < x < ax and 0 < y < ay,
                 f"starts_m[{i}]",
                 (x, y),
@@ -305,17 +319,17 @@ class ScenarioConfig:
             )
         dx, dy = self.dock_center_m
         r = self.dock_radius_m
-        _require(r > 0, "dock_radius_m", r, "a radius > 0 m")
-        _require(
+        require(r > 0, "dock_radius_m", r, "a radius > 0 m")
+        require(
             r <= dx <= ax - r and r <= dy <= ay - r,
             "dock_center_m",
             self.dock_center_m,
             "a centre whose dock circle lies inside area_m",
         )
-        _positive(self, "slot_s")
-        _require(self.horizon_slots >= 1, "horizon_slots", self.horizon_slots, "an integer >= 1")
-        _require(self.start_jitter_m >= 0, "start_jitter_m", self.start_jitter_m, "a number >= 0")
-        _require(
+        positive(self, "slot_s")
+        require(self.horizon_slots >= 1, "horizon_slots", self.horizon_slots, "an integer >= 1")
+        require(self.start_jitter_m >= 0, "start_jitter_m", self.start_jitter_m, "a number >= 0")
+        require(
             self.start_heading_jitter_deg >= 0,
             "start_heading_jitter_deg",
             self.start_heading_jitter_deg,
@@ -343,7 +357,7 @@ class Config:
         return dataclasses.replace(self, **sections)
 
     def to_dict(self) -> dict[str, Any]:
-        return _to_plain(dataclasses.asdict(self))
+        return to_plain(self)
 
     def save(self, path: str | Path) -> None:
         """Write YAML (.yaml/.yml) or JSON (.json)."""
@@ -358,137 +372,9 @@ class Config:
 
     @classmethod
     def from_dict(cls, data: Any) -> Config:
-        return _build(cls, data, "config")
+        return build_dataclass(cls, data, "config")
 
     @classmethod
     def load(cls, path: str | Path) -> Config:
         """Read a YAML or JSON file written by `save` (or by hand; missing keys take defaults)."""
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"config file {path} does not exist")
-        text = path.read_text()
-        try:
-            data = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
-        except (json.JSONDecodeError, yaml.YAMLError) as exc:
-            raise ConfigError(f"config file {path} is not valid YAML/JSON: {exc}") from exc
-        return cls.from_dict({} if data is None else data)
-
-
-def _to_plain(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _to_plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_to_plain(v) for v in value]
-    return value
-
-
-def _convert(tp: Any, value: Any, name: str) -> Any:
-    """Check `value` against the annotation `tp` and convert lists to tuples."""
-    origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
-        return _build(tp, value, name)
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{name}={value!r} has the wrong type: accepted a list")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{name}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise ConfigError(f"{name}={value!r} is invalid: accepted a list of {len(args)} values")
-        return tuple(
-            _convert(a, v, f"{name}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
-        )
-    if origin in (typing.Union, types.UnionType):
-        raise ConfigError(f"{name}: union types are not supported in configs")
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{name}={value!r} has the wrong type: accepted a number")
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{name}={value!r} has the wrong type: accepted an integer")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{name}={value!r} has the wrong type: accepted a string")
-        return value
-    raise ConfigError(f"{name}: unsupported field type {tp}")
-
-
-def _build(cls: Any, data: Any, name: str) -> Any:
-    if isinstance(data, cls):
-        return data
-    if not isinstance(data, dict):
-        raise ConfigError(f"{name}={data!r} has the wrong type: accepted a mapping")
-    hints = typing.get_type_hints(cls)
-    known = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ConfigError(f"{name}: unknown key(s) {unknown}; accepted keys {sorted(known)}")
-    kwargs = {k: _convert(hints[k], v, f"{name}.{k}") for k, v in data.items()}
-    return cls(**kwargs)
-
-
-def random_layout(
-    n_nodes: int,
-    seed: int,
-    scenario: ScenarioConfig | None = None,
-    min_spacing_m: float = 80.0,
-    margin_m: float = 50.0,
-) -> tuple[Point, ...]:
-    """Seeded node layout inside the area, `min_spacing_m` apart and outside the dock zone."""
-    _require(
-        MIN_NODES <= n_nodes <= MAX_NODES,
-        "n_nodes",
-        n_nodes,
-        f"an integer from {MIN_NODES} to {MAX_NODES}",
-    )
-    sc = scenario or ScenarioConfig()
-    rng = np.random.default_rng(seed)
-    lo = np.array([margin_m, margin_m])
-    hi = np.asarray(sc.area_m) - margin_m
-    dock = np.asarray(sc.dock_center_m)
-    points: list[np.ndarray] = []
-    for _ in range(100_000):
-        p = rng.uniform(lo, hi)
-        if np.linalg.norm(p - dock) < sc.dock_radius_m + min_spacing_m:
-            continue
-        if all(np.linalg.norm(p - q) >= min_spacing_m for q in points):
-            points.append(p)
-            if len(points) == n_nodes:
-                return tuple((round(float(x), 1), round(float(y), 1)) for x, y in points)
-    raise ConfigError(f"cannot place {n_nodes} nodes {min_spacing_m} m apart in area {sc.area_m}")
-
-
-def make_config(
-    n_auvs: int = 2,
-    n_nodes: int = 7,
-    layout: str = "paper",
-    seed: int = 0,
-    base: Config | None = None,
-) -> Config:
-    """A config with `n_auvs` AUVs and a node layout.
-
-    Args:
-        n_auvs: number of AUVs (1 to 4).
-        n_nodes: number of nodes (2 to 30).
-        layout: "paper" (the paper's 7- or 13-node layout) or "random" (seeded by `seed`).
-        seed: seed of a random layout.
-        base: config whose other sections are kept (defaults: the paper's).
-    """
-    base = base or Config()
-    if layout == "paper":
-        _require(
-            n_nodes in PAPER_LAYOUTS,
-            "n_nodes",
-            n_nodes,
-            f"{sorted(PAPER_LAYOUTS)} with layout='paper' (use layout='random' otherwise)",
-        )
-        nodes = PAPER_LAYOUTS[n_nodes]
-    elif layout == "random":
-        nodes = random_layout(n_nodes, seed, base.scenario)
-    else:
-        raise ConfigError(f"layout={layout!r} is invalid: accepted 'paper' or 'random'")
-    nodes = tuple((float(x), float(y)) for x, y in nodes)
-    scenario = dataclasses.replace(base.scenario, n_auvs=n_auvs, nodes_m=nodes)
-    return base.replace(scenario=scenario)
+        return cls.from_dict(load_mapping(path, "config file"))

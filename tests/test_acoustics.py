@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from iout_mj import acoustics
+from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig
 
 CFG = AcousticsConfig()

@@ -8,10 +8,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from iout_mj.baselines import POLICIES, make_policy
+from iout_mj.agents.baselines import POLICIES, make_policy
 from iout_mj.envs import ENV_ID
-from iout_mj.evaluation import SUMMARY_KEYS, evaluate, scenario_config
-from iout_mj.missions import load_policy, run_episode
+from iout_mj.experiments.evaluate import SUMMARY_KEYS, evaluate, scenario_config
+from iout_mj.experiments.mission import load_policy, run_episode
 
 
 @pytest.mark.parametrize("name", sorted(POLICIES))
@@ -110,7 +110,7 @@ def test_same_seed_same_start_for_every_policy():
     for name in ("greedy", "planner"):
         env = gym.make(ENV_ID, backend="kinematic", n_auvs=2)
         env.reset(seed=5)
-        starts.append(env.unwrapped.mission.positions_m.copy())
+        starts.append(env.unwrapped.mission.state.positions_m.copy())
         make_policy(name)
     assert np.array_equal(*starts)
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from iout_mj import acoustics
+from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig
 
 ROOT = Path(__file__).resolve().parents[1]

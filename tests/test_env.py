@@ -146,7 +146,7 @@ def test_network_and_energy_bookkeeping(backend):
     assert m.network.aoi[0] == 2.0 and m.network.aoi[1] == 2.0
     assert m.network.energy_j[0] > cfg.network.node_initial_energy_j  # AET outweighs uplink
     expected = (9.0 * 1.0**3 / 0.7 + 40.0) * 25.0
-    assert m.propulsion_energy_j[0] == pytest.approx(expected, rel=0.02)
+    assert m.state.propulsion_energy_j[0] == pytest.approx(expected, rel=0.02)
     for _ in range(2):
         env.step(np.array([5, 3, 0, 0]))
     assert m.network.aoi[0] == 1.0  # third delivery resets
@@ -168,7 +168,7 @@ def test_boundary_attempt_is_penalised_and_kept_inside(backend):
         _, _, _, _, info = env.step(np.array([5, 3, 0, 0]))  # keep going west at 1 m/s
         terms.append(info["reward_terms"]["boundary"])
     assert terms[0] == 0.0 and terms[1] == -20.0
-    x = env.unwrapped.mission.positions_m[0, 0]
+    x = env.unwrapped.mission.state.positions_m[0, 0]
     assert -0.05 <= x <= 16.0  # the fence is a (stiff) soft constraint
 
 
@@ -208,7 +208,7 @@ def test_truncation_at_horizon(backend):
     start_dist = np.linalg.norm(m.log.positions_m[0] - m.dock_m, axis=1)
     slack_start = np.maximum(0.0, start_dist - 2.0 * 3 * 25)  # potential telescopes
     total = sum(t["deadline"] for t in terms)
-    assert total == pytest.approx(0.1 * float(np.sum(slack_start - m.dock_dist_m)))
+    assert total == pytest.approx(0.1 * float(np.sum(slack_start - m.state.dock_dist_m)))
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

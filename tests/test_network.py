@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from iout_mj import acoustics
+from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig, NetworkConfig
-from iout_mj.network import SensorNetwork, jain_index
+from iout_mj.world.network import SensorNetwork, jain_index
 
 NODES = [(100.0, 100.0), (900.0, 900.0)]
 NEAR = np.array([[100.0, 150.0]])  # 50 m from node 0, far from node 1

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from iout_mj.missions import run_mission
+from iout_mj.experiments.mission import run_mission
 
 pytestmark = pytest.mark.slow
 
@@ -63,7 +63,7 @@ def test_missing_gl_library_gives_the_documented_message():
         "ctypes.util.find_library = lambda name: None\n"  # as on a machine without Mesa
         "import iout_mj, mujoco\n"
         "print(os.environ['MUJOCO_GL'], '|', iout_mj.GL_NOTE)\n"
-        "from iout_mj.render import make_renderer, RenderError\n"
+        "from iout_mj.backends.mujoco.render import make_renderer, RenderError\n"
         "try:\n"
         "    make_renderer(mujoco.MjModel.from_xml_string('<mujoco/>'), 8, 8)\n"
         "except RenderError as e:\n"

@@ -9,7 +9,7 @@ import pytest
 
 from iout_mj.config import ConfigError
 from iout_mj.envs import ENV_ID
-from iout_mj.missions import load_policy, run_episode
+from iout_mj.experiments.mission import load_policy, run_episode
 from iout_mj.training import PhaseConfig, TrainConfig, train
 
 pytestmark = pytest.mark.slow
@@ -103,7 +103,7 @@ def test_train_cli_rejects_bad_configs(tmp_path):
 
 
 def test_shipped_policies_load_and_refuse_other_scenarios():
-    from iout_mj.policies import SHIPPED_DIR
+    from iout_mj.agents.policies import SHIPPED_DIR
 
     shipped = sorted(p.name for p in SHIPPED_DIR.iterdir() if (p / "model.zip").is_file())
     assert "ppo-n1-k7" in shipped

@@ -9,9 +9,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from iout_mj.envs import ENV_ID
-from iout_mj.kinematic import move
+from iout_mj.backends.kinematic import move
 from iout_mj.mission import ActionError, Mission
-from iout_mj.vec_env import KinematicVecEnv, PhysicsVecEnv
+from iout_mj.envs import KinematicVecEnv, PhysicsVecEnv
 
 
 def docked_start(cfg):
@@ -78,7 +78,7 @@ def test_diverged_physics_ends_only_its_environment(cfg, rng):
     assert dones.tolist() == [False, True, False]
     assert "diverged" in infos[1]["error"] and "metrics" in infos[1]
     assert rewards[1] == 0.0 and np.isfinite(obs).all()
-    assert venv.mission.slot.tolist() == [1, 0, 1]  # env 1 restarted, the others go on
+    assert venv.mission.state.slot.tolist() == [1, 0, 1]  # env 1 restarted, the others go on
     with pytest.raises(ValueError, match="nthread=-1"):
         PhysicsVecEnv(2, config=cfg, nthread=-1)
     venv.close()
@@ -89,15 +89,15 @@ def test_partial_reset_only_touches_masked_rows(cfg):
     rng = np.random.RandomState(0)
     m.reset(rng)
     for _ in range(3):
-        move(m, np.tile(m.action_high // 2, (4, 1)))
+        move(m, np.tile(m.actions.high // 2, (4, 1)))
     before = m.observation()
     mask = np.array([True, False, True, False])
     m.reset(rng, mask)
     after = m.observation()
     for name in before:
         np.testing.assert_array_equal(after[name][~mask], before[name][~mask])
-    assert m.slot.tolist() == [0, 3, 0, 3]
-    assert not np.array_equal(m.positions_m[0], m.positions_m[2])  # one draw per row
+    assert m.state.slot.tolist() == [0, 3, 0, 3]
+    assert not np.array_equal(m.state.positions_m[0], m.state.positions_m[2])  # one draw per row
 
 
 def test_seeding_reproduces_the_batch(cfg, rng):
@@ -140,12 +140,12 @@ def test_aoi_booked_after_an_early_end_matches_slot_by_slot_ageing(cfg):
     m.reset(np.random.RandomState(0))
     a_max = cfg.network.aoi_max
     m.network.aoi[:] = np.array([[1, 5, a_max - 2, a_max, 3, 9, 30]] * 3)
-    m.slot[:] = [0, 40, 54]
+    m.state.slot[:] = [0, 40, 54]
     expected = []
     for e in range(3):
         ages = m.network.aoi[e].copy()
         total = 0.0
-        for _ in range(cfg.scenario.horizon_slots - m.slot[e]):
+        for _ in range(cfg.scenario.horizon_slots - m.state.slot[e]):
             ages = np.minimum(ages + 1, a_max)
             total += ages.mean()
         expected.append(total)
@@ -160,7 +160,7 @@ def test_physics_batch_places_each_envs_own_layout_and_current(cfg):
     assert not np.array_equal(m.network.nodes_m[0], m.network.nodes_m[1])
     for e, p in enumerate(venv.physics):
         np.testing.assert_array_equal(p.model.ptr.body_pos[p._nodes, :2], m.network.nodes_m[e])
-        np.testing.assert_array_equal(p.model.ptr.opt.wind[:2], m.current_mps[e])
-        np.testing.assert_allclose(p.positions_m(), m.positions_m[e])
-    assert not np.array_equal(m.current_mps[0], m.current_mps[1])
+        np.testing.assert_array_equal(p.model.ptr.opt.wind[:2], m.state.current_mps[e])
+        np.testing.assert_allclose(p.positions_m(), m.state.positions_m[e])
+    assert not np.array_equal(m.state.current_mps[0], m.state.current_mps[1])
     venv.close()

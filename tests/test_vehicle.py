@@ -4,11 +4,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from iout_mj import energy, names, vehicle
+from iout_mj.backends.mujoco import names, vehicle
+from iout_mj.world import propulsion
 from iout_mj.config import make_config
-from iout_mj.geometry import wrap_angle
-from iout_mj.physics import AUVPhysics
-from iout_mj.validation import maneuvers, steady_state, timestep_change
+from iout_mj.world.geometry import wrap_angle
+from iout_mj.backends.mujoco.physics import AUVPhysics
+from iout_mj.experiments.energy_validation import maneuvers, steady_state, timestep_change
 
 CFG1 = make_config(1, 7)
 
@@ -86,7 +87,7 @@ def test_energy_is_zero_at_rest_and_grows_as_speed_cubed():
         p.step(500)
         powers.append(p.mech_energy_j[0, 0] / 25.0)
     assert powers[1] / powers[0] == pytest.approx(8.0, rel=0.01)
-    assert powers[0] == pytest.approx(float(energy.drag_power_w(1.0, CFG1.motion)) * 0.7, rel=0.01)
+    assert powers[0] == pytest.approx(float(propulsion.drag_power_w(1.0, CFG1.motion)) * 0.7, rel=0.01)
 
 
 def test_speed_step_tracked_and_never_above_v_max():

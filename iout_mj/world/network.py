@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from iout_mj import acoustics
+from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig, NetworkConfig
-from iout_mj.geometry import pairwise_distance_m
+from iout_mj.world.geometry import pairwise_distance_m
 
 FloatArray = NDArray[np.float64]
 INITIAL_AOI = 1.0

@@ -5,15 +5,27 @@ from __future__ import annotations
 
 import os
 import platform
+import subprocess
+import sys
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
+import mujoco
 import numpy as np
-from numpy.typing import NDArray
+import torch
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-FloatArray = NDArray[np.float64]
+from iout_mj.backends.mujoco.physics import Stepper
+from iout_mj.backends.mujoco.task import substeps_per_slot
+from iout_mj.config import Config
+from iout_mj.envs import KinematicVecEnv, MultiAUVEnv, PhysicsVecEnv
+from iout_mj.scenarios import fixed_config
+from iout_mj.training import TrainConfig, new_model, vec_env
+from iout_mj.training.trainer import make_env
+from iout_mj.types import FloatArray
 
 REPEATS = 3
 
@@ -29,10 +41,7 @@ def _median_rate(fn: Callable[[], int], repeats: int = REPEATS) -> float:
 
 
 def _env(backend: str, n: int, k: int, **kw: Any) -> Any:
-    from iout_mj.envs import MultiAUVEnv
-    from iout_mj.evaluation import scenario_config
-
-    return MultiAUVEnv(backend=backend, config=scenario_config(n, k), **kw)
+    return MultiAUVEnv(backend=backend, config=fixed_config(n, k), **kw)
 
 
 def _random_actions(space: Any, count: int = 64, batch: tuple[int, ...] = ()) -> list[Any]:
@@ -69,8 +78,6 @@ def _raw_pass(
     model: Any, inputs: list[tuple[FloatArray, FloatArray]], nstep: int
 ) -> Callable[[], int]:
     """Plain mj_step(nstep) from recorded (start state, control) pairs, one slot each."""
-    import mujoco
-
     data = mujoco.MjData(model)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
@@ -99,39 +106,28 @@ def _paired(env_run: Callable[[], int], raw_run: Callable[[], int]) -> dict[str,
     }
 
 
-def _recorded(stepper: Any, calls: Callable[[], Any]) -> list[tuple[FloatArray, FloatArray]]:
+def _recorded(stepper: Stepper, calls: Callable[[], Any]) -> list[tuple[FloatArray, FloatArray]]:
     """Run `calls` once, keeping every env's (start state, control) of every rollout."""
-    kept: list[tuple[FloatArray, FloatArray]] = []
-    step = stepper.step
-
-    def recording(physics: Any, nstep: int) -> Any:
-        out = step(physics, nstep)
-        state0, ctrl = stepper.inputs
-        kept.extend((state0[i].copy(), ctrl[i, 0].copy()) for i in range(len(physics)))
-        return out
-
-    stepper.step = recording
+    stepper.recorded = []
     try:
         calls()
+        return stepper.recorded
     finally:
-        del stepper.step
-    return kept
+        stepper.recorded = None
 
 
 def slot_vs_raw(n: int, k: int, slots: int = 40) -> dict[str, float]:
     """MuJoCo env steps/s over plain mj_step(nstep) on the same model from the same states
     with the same controls (so both do the same physics work): one env through gymnasium and
     dm_control, and a `PhysicsVecEnv` batch on one thread."""
-    from iout_mj.evaluation import scenario_config
-    from iout_mj.vec_env import PhysicsVecEnv
-
     env = _env("mujoco", n, k)
-    model, nstep = env.physics.model.ptr, env._env._n_sub_steps
+    model = env.physics.model.ptr
+    nstep = substeps_per_slot(env.cfg, env.physics.dt_s)
     run = _env_pass(env, slots)
-    single = _paired(run, _raw_pass(model, _recorded(env.physics._stepper, run), nstep))
+    single = _paired(run, _raw_pass(model, _recorded(env.physics.stepper, run), nstep))
     env.close()
 
-    venv = PhysicsVecEnv(PHYSICS_BATCH, config=scenario_config(n, k), seed=0)
+    venv = PhysicsVecEnv(PHYSICS_BATCH, config=fixed_config(n, k), seed=0)
     actions = _random_actions(venv.action_space, 16, (PHYSICS_BATCH,))
     calls = max(slots // PHYSICS_BATCH, 4)
 
@@ -142,7 +138,7 @@ def slot_vs_raw(n: int, k: int, slots: int = 40) -> dict[str, float]:
             venv.step(actions[i % len(actions)])
         return calls * PHYSICS_BATCH
 
-    batch = _paired(batch_run, _raw_pass(model, _recorded(venv._stepper, batch_run), nstep))
+    batch = _paired(batch_run, _raw_pass(model, _recorded(venv.stepper, batch_run), nstep))
     venv.close()
     return {**single, **{f"batch_{PHYSICS_BATCH}_{key}": v for key, v in batch.items()}}
 
@@ -154,11 +150,8 @@ KINEMATIC_BATCH = 64
 def kinematic_rate(n: int, k: int, steps: int = 3000) -> dict[str, float]:
     """Kinematic env steps/s on one core: one env through the gymnasium API, and a batch of
     `KINEMATIC_BATCH` envs through `KinematicVecEnv` (the backend PPO trains on)."""
-    from iout_mj.evaluation import scenario_config
-    from iout_mj.vec_env import KinematicVecEnv
-
     single = _env_rate(_env("kinematic", n, k), steps)
-    venv = KinematicVecEnv(KINEMATIC_BATCH, config=scenario_config(n, k), seed=0)
+    venv = KinematicVecEnv(KINEMATIC_BATCH, config=fixed_config(n, k), seed=0)
     actions = _random_actions(venv.action_space, 16, (KINEMATIC_BATCH,))
     calls = max(steps // KINEMATIC_BATCH, 20)
 
@@ -197,13 +190,6 @@ def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2)
     """PPO steps/s (collection + updates) with the training configuration's hyperparameters
     and vectorisation (`training.vec_env`: one in-process batch of `n_envs`); None =
     `TrivialEnv` x `n_envs`, in-process too (DummyVecEnv)."""
-    from functools import partial
-
-    import torch
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-
-    from iout_mj.training import TrainConfig, new_model, vec_env
-
     cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs)
     torch.set_num_threads(cfg.torch_threads)
     if backend is None:
@@ -222,12 +208,6 @@ def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2)
 
 
 def _worker_rate(workers: int, n: int, k: int, steps: int) -> float:
-    from functools import partial
-
-    from stable_baselines3.common.vec_env import SubprocVecEnv
-
-    from iout_mj.training import TrainConfig, make_env
-
     cfg = TrainConfig(n_auvs=n, n_nodes=k)
     venv = SubprocVecEnv(
         [partial(make_env, cfg, "mujoco", i) for i in range(workers)], start_method="spawn"
@@ -268,12 +248,9 @@ def render_fps(frames: int = 16) -> float:
 
 def thread_scaling(n: int, k: int, calls: int = 5) -> float:
     """PhysicsVecEnv steps/s on two rollout threads over one (both in one process)."""
-    from iout_mj.evaluation import scenario_config
-    from iout_mj.vec_env import PhysicsVecEnv
-
     rates = []
     for nthread in (0, 2):
-        venv = PhysicsVecEnv(PHYSICS_BATCH, config=scenario_config(n, k), seed=0, nthread=nthread)
+        venv = PhysicsVecEnv(PHYSICS_BATCH, config=fixed_config(n, k), seed=0, nthread=nthread)
         actions = _random_actions(venv.action_space, 16, (PHYSICS_BATCH,))
         venv.reset()
 
@@ -288,11 +265,8 @@ def thread_scaling(n: int, k: int, calls: int = 5) -> float:
     return rates[1] / rates[0]
 
 
-def _peak_rss_mb(code: str) -> float:
+def peak_rss_mb(code: str) -> float:
     """Peak resident memory (VmHWM) of a fresh Python process running `code`."""
-    import subprocess
-    import sys
-
     code += "\nprint(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.split()[-1]) / 1024
@@ -301,13 +275,13 @@ def _peak_rss_mb(code: str) -> float:
 def memory_mb(n_envs: int = PHYSICS_BATCH) -> dict[str, float]:
     """Peak resident memory of one MuJoCo env over an episode, and of PPO training on the
     MuJoCo backend as configured (one process: `n_envs` scenes, rollout threads, PPO)."""
-    one = _peak_rss_mb(
+    one = peak_rss_mb(
         "import gymnasium as gym, iout_mj\n"
         "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=2, n_nodes=7)\n"
         "env.reset(seed=0)\n"
         "for _ in range(55): env.step(env.action_space.sample())\n"
     )
-    train = _peak_rss_mb(
+    train = peak_rss_mb(
         "from stable_baselines3.common.vec_env import VecNormalize\n"
         "from iout_mj.training import TrainConfig, new_model, vec_env\n"
         f"cfg = TrainConfig(n_auvs=2, n_nodes=7, n_envs={n_envs}, n_steps=64, batch_size=64)\n"
@@ -319,8 +293,6 @@ def memory_mb(n_envs: int = PHYSICS_BATCH) -> dict[str, float]:
 
 def run_all(quick: bool = False) -> dict[str, Any]:
     """Every benchmark; `quick` shrinks repeats for tests."""
-    from iout_mj.config import Config
-
     cfg = Config()
     sizes = [(1, 7), (2, 7), (2, 13), (4, 13)] if not quick else [(2, 7)]
     result: dict[str, Any] = {
@@ -355,79 +327,3 @@ def run_all(quick: bool = False) -> dict[str, Any]:
     result["render_fps"] = render_fps(4 if quick else 16)
     result["memory"] = memory_mb(2 if quick else PHYSICS_BATCH)
     return result
-
-
-def format_table(r: dict[str, Any]) -> str:
-    lines = [
-        f"machine: {r['machine']['cpus']} CPUs, Python {r['machine']['python']}; physics "
-        f"dt {r['timestep_s']} s, {r['substeps_per_slot']} substeps per 25 s slot",
-        "",
-    ]
-    lines.append(
-        "slot_vs_raw (MuJoCo env steps/s over plain mj_step(nstep) from the same states; "
-        f"target >= 0.9): one gymnasium env | PhysicsVecEnv of {PHYSICS_BATCH}, one thread"
-    )
-    b = f"batch_{PHYSICS_BATCH}_"
-    for key, v in r["slot_vs_raw"].items():
-        lines.append(
-            f"  {key:<7} env {v['env_steps_per_s']:6.1f}/s raw {v['raw_slots_per_s']:6.1f}/s "
-            f"ratio {v['ratio']:.3f} | env {v[b + 'env_steps_per_s']:6.1f}/s raw "
-            f"{v[b + 'raw_slots_per_s']:6.1f}/s ratio {v[b + 'ratio']:.3f}"
-        )
-    lines.append(
-        f"kinematic_steps_per_s (one core, KinematicVecEnv of {r['kinematic_batch']} envs; "
-        "target >= 15000 for N2_K13) [one env through gymnasium]"
-    )
-    for key, v in r["kinematic_steps_per_s"].items():
-        lines.append(f"  {key:<7} {v:10.0f}   [{r['kinematic_single_env_steps_per_s'][key]:7.0f}]")
-    p = r["ppo_fps"]
-    lines.append(
-        f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {p['physics']:.0f} / trivial "
-        f"{p['trivial']:.0f} steps/s; target >= 0.6); kinematic batch {p['kinematic']:.0f} steps/s"
-    )
-    lines.append(f"subproc_scaling {r['subproc_scaling']:.3f} (2 workers / 1; target >= 1.8)")
-    lines.append(f"thread_scaling {r['thread_scaling']:.3f} (PhysicsVecEnv, 2 rollout threads / 1)")
-    lines.append(f"render_fps {r['render_fps']:.1f} (640x480, top-down + chase, overlays)")
-    mem = r["memory"]
-    lines.append(
-        f"memory (peak RSS): one env {mem['one_env_mb']:.0f} MB; PPO on the MuJoCo backend "
-        f"with {mem['training_envs']} envs (one process) {mem['training_mb']:.0f} MB"
-    )
-    return "\n".join(lines)
-
-
-def format_markdown(r: dict[str, Any]) -> str:
-    """The README's table of one run."""
-    b = f"batch_{PHYSICS_BATCH}_"
-    rows = ["| benchmark | value | target |", "| --- | --- | --- |"]
-    for key, v in r["slot_vs_raw"].items():
-        rows.append(
-            f"| slot_vs_raw {key}, one env (env {v['env_steps_per_s']:.0f} / raw "
-            f"{v['raw_slots_per_s']:.0f} slots/s) | {v['ratio']:.3f} | >= 0.9 |"
-        )
-        rows.append(
-            f"| slot_vs_raw {key}, PhysicsVecEnv of {PHYSICS_BATCH} on one thread (env "
-            f"{v[b + 'env_steps_per_s']:.0f} / raw {v[b + 'raw_slots_per_s']:.0f}) "
-            f"| {v[b + 'ratio']:.3f} | >= 0.9 |"
-        )
-    single = r["kinematic_single_env_steps_per_s"]
-    for key, v in r["kinematic_steps_per_s"].items():
-        target = ">= 15,000" if key == "N2_K13" else ""
-        rows.append(
-            f"| kinematic_steps_per_s {key}, KinematicVecEnv of {r['kinematic_batch']} "
-            f"[one env] | {v:,.0f} [{single[key]:,.0f}] | {target} |"
-        )
-    p, mem = r["ppo_fps"], r["memory"]
-    rows += [
-        f"| ppo_fps_ratio (physics {p['physics']:.0f} / trivial {p['trivial']:.0f} steps/s; "
-        f"kinematic {p['kinematic']:.0f}) | {r['ppo_fps_ratio']:.3f} | >= 0.6 |",
-        f"| subproc_scaling (2 worker processes / 1) | {r['subproc_scaling']:.3f} | >= 1.8 |",
-        f"| thread_scaling (PhysicsVecEnv, 2 rollout threads / 1) | {r['thread_scaling']:.3f} | |",
-        f"| render_fps 640x480 (top-down + chase, trails, links, overlay) | "
-        f"{r['render_fps']:.1f} | |",
-        f"| peak resident memory, one MuJoCo env (N=2, K=7) | {mem['one_env_mb']:.0f} MB "
-        "| < 200 MB |",
-        f"| peak resident memory, PPO on the MuJoCo backend, {mem['training_envs']} envs in one "
-        f"process | {mem['training_mb']:.0f} MB | |",
-    ]
-    return "\n".join(rows)

@@ -25,7 +25,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from iout_mj import names
+from iout_mj.backends.mujoco import names
 from iout_mj.config import Config, MotionConfig
 
 AUV_DEPTH_M = -10.0

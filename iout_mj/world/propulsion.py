@@ -1,4 +1,4 @@
-"""The paper's cubic propulsion-energy model (eqs. 12-13), numpy only."""
+"""Propulsion energy: the paper's cubic model (eqs. 12-13) and the meter of measured work."""
 
 from __future__ import annotations
 
@@ -45,3 +45,13 @@ def slot_energy_j(
     return np.where(
         v > 0, propulsion_power_w(v, motion) * d / safe_v, motion.hotel_power_w * slot_s
     )
+
+
+def electrical_energy_j(mechanical_work_j: ArrayLike, motion: MotionConfig) -> FloatArray:
+    """The one energy meter: measured actuator work |F v| dt over eta_prop (no hotel load)."""
+    return np.asarray(mechanical_work_j, dtype=float) / motion.prop_efficiency
+
+
+def hotel_energy_j(duration_s: ArrayLike, motion: MotionConfig) -> FloatArray:
+    """The hotel load H over a duration."""
+    return motion.hotel_power_w * np.asarray(duration_s, dtype=float)

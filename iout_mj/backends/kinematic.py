@@ -1,10 +1,10 @@
 """The paper's discrete-time kinematics and cubic energy model: the fast backend (no MuJoCo).
 
-Same spaces, mission rules, reward and metrics as the MuJoCo task (`mission.Mission`); the
+Same spaces, mission rules, reward and metrics as the MuJoCo task (`iout_mj.mission.Mission`); the
 vehicles jump to p + v_sp * slot * (cos theta_sp, sin theta_sp) each slot, a move that would
-leave the area is rejected (the AUV stays), and propulsion energy is `energy.slot_energy_j`.
+leave the area is rejected (the AUV stays), and propulsion energy is `propulsion.slot_energy_j`.
 `move` works on one environment or on a batch; `KinematicEnvironment` is the dm_env of one,
-`iout_mj.vec_env.KinematicVecEnv` steps B of them per call.
+`iout_mj.envs.KinematicVecEnv` steps B of them per call.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ import dm_env
 import numpy as np
 from dm_env import specs
 
-from iout_mj import energy
+from iout_mj.world import propulsion
 from iout_mj.config import Config
-from iout_mj.geometry import norm_xy, wrap_angle
+from iout_mj.world.geometry import norm_xy, wrap_angle
 from iout_mj.mission import Mission
 
 PATH_FRACTIONS = np.linspace(0.0, 1.0, 6)[1:]
@@ -26,10 +26,10 @@ PATH_FRACTIONS = np.linspace(0.0, 1.0, 6)[1:]
 
 def move(m: Mission, action: Any) -> Any:
     """One slot of the kinematic model for every environment of `m`; returns the reward."""
-    start = m.positions_m.copy()
+    start = m.state.positions_m.copy()
     heading, speed = m.begin_slot(action)
-    end = np.where(m.boundary_attempt[..., None], start, m.straight_end_m)
-    prop = energy.travel_energy_j(speed, norm_xy(end - start), m.cfg.motion)
+    end = np.where(m.state.boundary_attempt[..., None], start, m.state.straight_end_m)
+    prop = propulsion.travel_energy_j(speed, norm_xy(end - start), m.cfg.motion)
     fraction = PATH_FRACTIONS.reshape(-1, *[1] * end.ndim)
     return m.end_slot(
         end,
@@ -64,19 +64,19 @@ class KinematicEnvironment(dm_env.Environment):
         m = self.mission
         reward = float(move(m, action))
         obs = m.observation()
-        if m.terminated:
+        if m.state.terminated:
             self._reset_next = True
             return dm_env.termination(reward, obs)
-        if m.truncated:
+        if m.state.truncated:
             self._reset_next = True
             return dm_env.truncation(reward, obs)
         return dm_env.transition(reward, obs)
 
     def action_spec(self) -> specs.BoundedArray:
-        return self.mission.action_spec()
+        return self.mission.actions.spec()
 
     def observation_spec(self) -> dict[str, specs.Array]:
         return {
             k: specs.Array(shape=(n,), dtype=np.float64, name=k)
-            for k, n in self.mission.observation_sizes().items()
+            for k, n in self.mission.observation_sizes.items()
         }

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-AUV_COLORS = ["#e6a800", "#d62f9a", "#2ca02c", "#ff7f0e"]
+from iout_mj import palette
+
 
 
 def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: Any = None) -> None:
@@ -32,7 +34,7 @@ def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: An
     ax.add_patch(dock)
     pos = np.array(trace["positions_m"])  # (slots + 1, N, 2)
     for i in range(pos.shape[1]):
-        c = AUV_COLORS[i % 4]
+        c = palette.auv_rgba(i)
         ax.plot(pos[:, i, 0], pos[:, i, 1], "-", color=c, lw=1.6, label=f"AUV {i + 1}")
         ax.plot(pos[0, i, 0], pos[0, i, 1], "o", color=c, ms=5)
         ax.plot(pos[-1, i, 0], pos[-1, i, 1], "s", color=c, ms=5)
@@ -79,8 +81,6 @@ def speed_heading_figure(traces: dict[str, dict[str, Any]], path: Path) -> None:
 
 def figures_from_results(results: Path, out: Path) -> list[Path]:
     """All figures from a folder written by `iout-mj evaluate --out`."""
-    import json
-
     path = results / "results.json"
     if not path.is_file():
         raise FileNotFoundError(
@@ -114,8 +114,6 @@ def figures_from_results(results: Path, out: Path) -> list[Path]:
 
 def training_curves(runs: list[Path], path: Path) -> Path:
     """Held-out evaluation during training (from each run's state.json) against steps."""
-    import json
-
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
     for run in runs:
         state = run / "state.json"
@@ -123,8 +121,8 @@ def training_curves(runs: list[Path], path: Path) -> Path:
             raise FileNotFoundError(f"{state} does not exist: not a training run folder")
         hist = json.loads(state.read_text())["history"]
         steps = np.array([h["num_timesteps"] for h in hist]) / 1e3
-        for ax, key in zip(axes, ("mean_aoi_horizon", "jain", "docked"), strict=True):
-            ax.plot(steps, [h[key] for h in hist], marker=".", label=run.name)
+        for ax, key in zip(axes, ("mean_aoi_horizon", "jain", "docking_rate"), strict=True):
+            ax.plot(steps, [h.get(key, h.get("docked")) for h in hist], marker=".", label=run.name)
         kinematic = [h["num_timesteps"] / 1e3 for h in hist if h["backend"] == "kinematic"]
         if kinematic and hist[-1]["backend"] == "mujoco":  # the fine-tuning phase starts here
             for ax in axes:
@@ -187,3 +185,63 @@ def results_figures(rows: list[dict[str, Any]], out: Path) -> list[Path]:
     plt.close(fig)
     paths.append(p)
     return paths
+
+
+def energy_validation_figure(result: dict[str, Any], traces: list, path: Path) -> None:
+    """Steady-state power vs speed, and per-slot energy of the manoeuvres (validate-energy)."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    steady = result["steady"]
+    v = [r["speed_mps"] for r in steady]
+    axes[0].plot(v, [r["model_power_w"] for r in steady], "-", label="paper model (cubic)")
+    axes[0].plot(v, [r["measured_power_w"] for r in steady], "o", label="MuJoCo, measured")
+    axes[0].set(
+        xlabel="speed (m/s)", ylabel="electrical power (W)", title="Steady state: power vs speed"
+    )
+    axes[0].legend()
+    axes[0].grid(alpha=0.3)
+    ax = axes[1]
+    for i, (name, r) in enumerate(traces):
+        slots = np.arange(1, len(r["measured_j"]) + 1)
+        line = ax.plot(slots, r["measured_j"] / 1e3, "-", color=f"C{i}", label=f"{name}")
+        ax.plot(slots, r["model_j"] / 1e3, "--", color=line[0].get_color())
+    ax.set(
+        xlabel="slot",
+        ylabel="energy per slot (kJ)",
+        title="Manoeuvres: measured (solid) vs model (dashed)",
+    )
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def format_table(result: dict[str, Any]) -> str:
+    lines = [
+        "Steady state (electrical power, W)",
+        f"{'speed m/s':>10} {'measured':>10} {'model':>10} {'rel.err':>9}",
+    ]
+    for r in result["steady"]:
+        lines.append(
+            f"{r['speed_mps']:>10.1f} {r['measured_power_w']:>10.2f} "
+            f"{r['model_power_w']:>10.2f} {r['rel_error']:>+9.2%}"
+        )
+    lines += [
+        "",
+        "Manoeuvres (energy over the manoeuvre, kJ)",
+        f"{'manoeuvre':<28} {'slots':>5} {'measured':>9} {'model':>9} {'gap':>8}",
+    ]
+    for r in result["maneuvers"]:
+        lines.append(
+            f"{r['name']:<28} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
+            f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%}"
+        )
+    ts = result["timestep"]
+    cands = ", ".join(f"dt={k} s: {v:.2%}" for k, v in ts["candidates"].items())
+    lines += [
+        "",
+        f"Timestep: largest dt with < 1% change when quartered: {ts['dt_s']} s "
+        f"({ts['rel_change_quarter_dt']:.3%}); {cands}",
+    ]
+    return "\n".join(lines)

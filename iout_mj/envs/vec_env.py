@@ -4,7 +4,7 @@ One `step` call moves all B environments (the same mission, network and reward c
 gymnasium env) with no Python loop over environments except the info dicts of the ones that
 finish:
 
-- `KinematicVecEnv`: the paper's kinematics on the batch (`kinematic.move`), one core.
+- `KinematicVecEnv`: the paper's kinematics on the batch (`backends.kinematic.move`), one core.
 - `PhysicsVecEnv`: B MuJoCo scenes stepped by one `mujoco.rollout` call, whose C threads
   (`nthread`) share the slot's substeps between cores: no worker processes, no pickling.
 
@@ -17,7 +17,6 @@ are `venv.mission.terms` (arrays of B), not per-step infos.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -30,12 +29,12 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from iout_mj.config import Config
-from iout_mj.envs import resolve_config
-from iout_mj.kinematic import move
-from iout_mj.mission import OBS_HIGH, OBS_LOW, Mission
-
-ConfigLike = Config | dict[str, Any] | str | Path | None
+from iout_mj.backends.kinematic import move
+from iout_mj.backends.mujoco.physics import AUVPhysics, Stepper
+from iout_mj.backends.mujoco.task import book, command, start_episode, substeps_per_slot
+from iout_mj.envs.gym_env import spaces
+from iout_mj.mission import Mission
+from iout_mj.scenarios import ConfigLike, resolve_config
 
 
 class MissionVecEnv(VecEnv):
@@ -62,12 +61,7 @@ class MissionVecEnv(VecEnv):
         self.mission = Mission(self.cfg, layout == "random", n_envs=int(n_envs))
         self.random = np.random.RandomState(seed)
         self.render_mode = None
-        size = sum(self.mission.observation_sizes().values())
-        super().__init__(
-            int(n_envs),
-            gym.spaces.Box(OBS_LOW, OBS_HIGH, shape=(size,), dtype=np.float32),
-            gym.spaces.MultiDiscrete(self.mission.action_high.copy()),
-        )
+        super().__init__(int(n_envs), *spaces(self.mission))
         self._actions: Any = None
         self._none_failed = np.zeros(self.num_envs, dtype=bool)
 
@@ -96,8 +90,8 @@ class MissionVecEnv(VecEnv):
         m = self.mission
         rewards, failed = self._move(self._actions)
         obs = m.flat_observation()
-        terminated = m.terminated | failed
-        done = terminated | m.truncated
+        terminated = m.state.terminated | failed
+        done = terminated | m.state.truncated
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if done.any():
             for e in np.flatnonzero(done):
@@ -170,32 +164,25 @@ class PhysicsVecEnv(MissionVecEnv):
         seed: int | None = None,
         nthread: int = 0,
     ):
-        from iout_mj.physics import AUVPhysics, Stepper
-        from iout_mj.task import substeps_per_slot
-
         if not isinstance(nthread, (int, np.integer)) or nthread < 0:
             raise ValueError(f"nthread={nthread!r} is invalid: accepted an integer >= 0")
         super().__init__(n_envs, n_auvs, n_nodes, layout, config, seed)
         self.physics = [AUVPhysics.from_config(self.cfg) for _ in range(self.num_envs)]
         self.substeps = substeps_per_slot(self.cfg, self.physics[0].dt_s)
-        self._stepper = Stepper(nthread)
+        self.stepper = Stepper(nthread)
 
     def _restart(self, mask: NDArray[np.bool_] | None) -> None:
-        from iout_mj.task import start_episode
-
         super()._restart(mask)
         rows = range(self.num_envs) if mask is None else np.flatnonzero(mask)
         for e in rows:
             start_episode(self.mission, self.physics[e], int(e))
 
     def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        from iout_mj.task import book, command
-
         meters = command(self.mission, self.physics, actions)
-        failed = self._stepper.step(self.physics, self.substeps)
+        failed = self.stepper.step(self.physics, self.substeps)
         return book(self.mission, self.physics, meters), failed
 
     def close(self) -> None:
-        self._stepper.close()
+        self.stepper.close()
         for p in self.physics:
             p.free()

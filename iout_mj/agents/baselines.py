@@ -12,8 +12,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from iout_mj import acoustics
-from iout_mj.geometry import pairwise_distance_m
+from iout_mj.world import acoustics
+from iout_mj.world.geometry import pairwise_distance_m
 from iout_mj.mission import Mission
 
 IntArray = NDArray[np.int64]
@@ -39,12 +39,12 @@ def steer(
     mission: Mission, targets_m: NDArray[np.float64], speeds_mps: NDArray[np.float64]
 ) -> tuple[IntArray, IntArray]:
     """Heading and speed indices that turn each AUV toward its target and toward a speed."""
-    delta = targets_m - mission.positions_m
+    delta = targets_m - mission.state.positions_m
     want = np.arctan2(delta[:, 1], delta[:, 0])
-    dtheta = _wrap(want - mission.heading_sp)
-    h = np.abs(mission.dtheta_rad[None, :] - dtheta[:, None]).argmin(axis=1)
-    dv = speeds_mps - mission.speed_sp
-    s = np.abs(mission.dv_mps[None, :] - dv[:, None]).argmin(axis=1)
+    dtheta = _wrap(want - mission.state.heading_sp)
+    h = np.abs(mission.actions.dtheta_rad[None, :] - dtheta[:, None]).argmin(axis=1)
+    dv = speeds_mps - mission.state.speed_sp
+    s = np.abs(mission.actions.dv_mps[None, :] - dv[:, None]).argmin(axis=1)
     return h, s
 
 
@@ -54,7 +54,7 @@ def approach_speed(distance_m: NDArray[np.float64], slot_s: float) -> NDArray[np
 
 
 def _slots_left(mission: Mission) -> float:
-    return float(mission.cfg.scenario.horizon_slots - mission.slot)
+    return float(mission.cfg.scenario.horizon_slots - mission.state.slot)
 
 
 def _must_dock(mission: Mission, extra_m: NDArray[np.float64] | float = 0.0) -> NDArray[np.bool_]:
@@ -62,11 +62,11 @@ def _must_dock(mission: Mission, extra_m: NDArray[np.float64] | float = 0.0) -> 
     speed, plus the slots to turn toward the dock and to ramp up to cruise speed."""
     m = mission.cfg.motion
     slot_m = CRUISE_MPS * mission.cfg.scenario.slot_s
-    delta = mission.dock_m - mission.positions_m
-    turn = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - mission.heading_sp))
+    delta = mission.dock_m - mission.state.positions_m
+    turn = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - mission.state.heading_sp))
     turn_slots = turn / np.radians(m.dtheta_max_deg)
-    ramp_slots = np.maximum(CRUISE_MPS - mission.speed_sp, 0) / m.dv_max_mps
-    travel = (mission.dock_dist_m + extra_m - mission.cfg.scenario.dock_radius_m * 0.5) / slot_m
+    ramp_slots = np.maximum(CRUISE_MPS - mission.state.speed_sp, 0) / m.dv_max_mps
+    travel = (mission.state.dock_dist_m + extra_m - mission.cfg.scenario.dock_radius_m * 0.5) / slot_m
     return travel + turn_slots + ramp_slots + DOCK_MARGIN_SLOTS >= _slots_left(mission)
 
 
@@ -87,12 +87,12 @@ class Greedy:
         n, k = mission.n_auvs, mission.n_nodes
         slot_s = mission.cfg.scenario.slot_s
         remaining_s = max(_slots_left(mission) - 1, 1) * slot_s
-        speed = np.clip(mission.dock_dist_m / remaining_s, 0.4, mission.cfg.motion.v_max_mps)
+        speed = np.clip(mission.state.dock_dist_m / remaining_s, 0.4, mission.cfg.motion.v_max_mps)
         targets = np.tile(mission.dock_m, (n, 1))
         h, s = steer(mission, targets, speed)
-        d = pairwise_distance_m(mission.positions_m, mission.network.nodes_m)
+        d = pairwise_distance_m(mission.state.positions_m, mission.network.nodes_m)
         wet = d.argmin(axis=1)
-        data = (mission.slot * n + np.arange(n)) % k
+        data = (mission.state.slot * n + np.arange(n)) % k
         return _pack(h, s, wet, data)
 
 
@@ -107,15 +107,15 @@ class RoundRobin:
 
     def __call__(self, mission: Mission) -> IntArray:
         n, k = mission.n_auvs, mission.n_nodes
-        if self._next is None or mission.slot == 0:
+        if self._next is None or mission.state.slot == 0:
             self._next = np.arange(n) % k
         nodes = mission.network.nodes_m
-        reached = np.linalg.norm(nodes[self._next] - mission.positions_m, axis=1) < NODE_REACHED_M
+        reached = np.linalg.norm(nodes[self._next] - mission.state.positions_m, axis=1) < NODE_REACHED_M
         self._next = np.where(reached, (self._next + n) % k, self._next)
         targets = nodes[self._next]
         dock = _must_dock(mission)
         targets = np.where(dock[:, None], mission.dock_m, targets)
-        dist = np.linalg.norm(targets - mission.positions_m, axis=1)
+        dist = np.linalg.norm(targets - mission.state.positions_m, axis=1)
         h, s = steer(mission, targets, approach_speed(dist, mission.cfg.scenario.slot_s))
         return _pack(h, s, self._next, self._next)
 
@@ -132,7 +132,7 @@ class RandomWalk:
         self._rng = np.random.default_rng(seed)
 
     def __call__(self, mission: Mission) -> IntArray:
-        return self._rng.integers(0, mission.action_high).astype(np.int64)
+        return self._rng.integers(0, mission.actions.high).astype(np.int64)
 
 
 class Planner:
@@ -154,9 +154,9 @@ class Planner:
         net = mission.network
         nodes = net.nodes_m
         slot_m = CRUISE_MPS * mission.cfg.scenario.slot_s
-        if self._target is None or mission.slot == 0:
+        if self._target is None or mission.state.slot == 0:
             self._target = np.full(n, -1)
-        d = pairwise_distance_m(mission.positions_m, nodes)  # (N, K)
+        d = pairwise_distance_m(mission.state.positions_m, nodes)  # (N, K)
         node_to_dock = np.linalg.norm(nodes - mission.dock_m, axis=1)
         left = _slots_left(mission)
         taken: set[int] = set()
@@ -182,7 +182,7 @@ class Planner:
         dist_t = d[np.arange(n), safe_t]
         targets = np.where(go_dock[:, None], mission.dock_m, nodes[safe_t])
         near = ~go_dock & (dist_t < NODE_REACHED_M)
-        dist = np.where(go_dock, mission.dock_dist_m, dist_t)
+        dist = np.where(go_dock, mission.state.dock_dist_m, dist_t)
         speed = np.where(near, 0.8, approach_speed(dist, mission.cfg.scenario.slot_s))
         h, s = steer(mission, targets, speed)
         h = np.where(near, mission.cfg.motion.heading_levels - 1, h)  # circle at the node

@@ -1,7 +1,7 @@
 """dm_control Task on AUVPhysics: actions -> servo setpoints, mission bookkeeping per slot.
 
 The three module functions join a `Mission` (one env or a batch) to its AUVPhysics (one per
-env); the task uses them with one physics, `vec_env.PhysicsVecEnv` with B.
+env); the task uses them with one physics, `iout_mj.envs.PhysicsVecEnv` with B.
 """
 
 from __future__ import annotations
@@ -16,13 +16,14 @@ from dm_env import specs
 
 from iout_mj.config import Config
 from iout_mj.mission import Mission
-from iout_mj.physics import AUVPhysics
+from iout_mj.world import propulsion
+from iout_mj.backends.mujoco.physics import AUVPhysics
 
 
 def start_episode(mission: Mission, physics: AUVPhysics, env: Any = ()) -> None:
     """Put environment `env` of a just reset `mission` (nodes, current, vehicles) into physics."""
-    physics.place_scene(mission.network.nodes_m[env], mission.current_mps[env])
-    physics.set_poses(mission.positions_m[env], mission.headings_rad[env], mission.speeds_mps[env])
+    physics.place_scene(mission.network.nodes_m[env], mission.state.current_mps[env])
+    physics.set_poses(mission.state.positions_m[env], mission.state.headings_rad[env], mission.state.speeds_mps[env])
 
 
 def command(mission: Mission, physics: Sequence[AUVPhysics], action: Any) -> np.ndarray:
@@ -42,10 +43,11 @@ def book(mission: Mission, physics: Sequence[AUVPhysics], meters_before_j: np.nd
     qpos = np.stack([p.data.ptr.qpos for p in physics]).reshape(*b, -1)
     qvel = np.stack([p.data.ptr.qvel for p in physics]).reshape(*b, -1)
     path = np.stack([p.substep_qpos for p in physics], axis=1)
-    mech = (
+    mech = propulsion.electrical_energy_j(
         np.stack([p.mech_energy_j for p in physics]).reshape(*b, -1, 2)
-        - meters_before_j.reshape(*b, -1, 2)
-    ) / (mission.cfg.motion.prop_efficiency)
+        - meters_before_j.reshape(*b, -1, 2),
+        mission.cfg.motion,
+    )
     return mission.end_slot(
         layout.positions_m(qpos),
         layout.headings_rad(qpos),
@@ -73,7 +75,7 @@ class DataCollectionTask(base.Task):
         start_episode(self.mission, physics)
 
     def action_spec(self, physics: AUVPhysics) -> specs.BoundedArray:
-        return self.mission.action_spec()
+        return self.mission.actions.spec()
 
     def before_step(self, action: Any, physics: AUVPhysics) -> None:
         self._meters_j = command(self.mission, [physics], action)
@@ -85,12 +87,12 @@ class DataCollectionTask(base.Task):
         return self.mission.observation()
 
     def get_reward(self, physics: AUVPhysics) -> float:
-        return float(self.mission.reward)
+        return float(self.mission.state.reward)
 
     def get_termination(self, physics: AUVPhysics) -> float | None:
-        if self.mission.terminated:
+        if self.mission.state.terminated:
             return 0.0
-        if self.mission.truncated:
+        if self.mission.state.truncated:
             return 1.0
         return None
 

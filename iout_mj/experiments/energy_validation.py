@@ -15,9 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from iout_mj import energy
-from iout_mj.config import Config, make_config
-from iout_mj.physics import AUVPhysics
+from iout_mj.agents.baselines import make_policy
+from iout_mj.backends.kinematic import KinematicEnvironment
+from iout_mj.backends.mujoco.physics import AUVPhysics
+from iout_mj.config import Config
+from iout_mj.experiments.figures import energy_validation_figure
+from iout_mj.scenarios import make_config
+from iout_mj.world import propulsion
 
 STEADY_SPEEDS_MPS = tuple(np.arange(1, 9) * 0.5)
 SETTLE_S = 100.0
@@ -40,19 +44,16 @@ class Maneuver:
 
 def _mission_maneuver() -> Maneuver:
     """The setpoints of one full planner mission (kinematic backend, N = 1, K = 7, seed 0)."""
-    from iout_mj.baselines import make_policy
-    from iout_mj.kinematic import KinematicEnvironment
-
     env = KinematicEnvironment(make_config(1, 7), seed=0)
     policy = make_policy("planner")
     env.reset()
-    start = env.mission.positions_m[0].copy()
-    start_heading = float(np.degrees(env.mission.heading_sp[0]))
+    start = env.mission.state.positions_m[0].copy()
+    start_heading = float(np.degrees(env.mission.state.heading_sp[0]))
     headings, speeds = [], []
     while True:
         ts = env.step(policy(env.mission))
-        headings.append(float(np.degrees(env.mission.heading_sp[0])))
-        speeds.append(float(env.mission.speed_sp[0]))
+        headings.append(float(np.degrees(env.mission.state.heading_sp[0])))
+        speeds.append(float(env.mission.state.speed_sp[0]))
         if ts.last():
             break
     return Maneuver(
@@ -94,9 +95,9 @@ def steady_state(cfg: Config, speeds_mps: tuple[float, ...] = STEADY_SPEEDS_MPS)
         physics.step(settle)
         before = physics.mech_energy_j.sum()
         physics.step(measure)
-        measured = (physics.mech_energy_j.sum() - before) / MEASURE_S / m.prop_efficiency
-        measured += m.hotel_power_w
-        model = float(energy.propulsion_power_w(v, m))
+        work_j = physics.mech_energy_j.sum() - before
+        measured = propulsion.electrical_energy_j(work_j, m) / MEASURE_S + m.hotel_power_w
+        model = float(propulsion.propulsion_power_w(v, m))
         rows.append(
             {
                 "speed_mps": float(v),
@@ -128,9 +129,10 @@ def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
         physics.step(nstep)
         end = physics.positions_m()[0]
         d = float(np.linalg.norm(end - start))
-        e = (physics.mech_energy_j.sum() - before) / m.prop_efficiency + m.hotel_power_w * slot_s
+        work_j = physics.mech_energy_j.sum() - before
+        e = propulsion.electrical_energy_j(work_j, m) + propulsion.hotel_energy_j(slot_s, m)
         measured.append(float(e))
-        model.append(float(energy.slot_energy_j(speed, d, slot_s, m)))
+        model.append(float(propulsion.slot_energy_j(speed, d, slot_s, m)))
         distance.append(d)
         ends.append(end.copy())
     physics.free()
@@ -188,69 +190,5 @@ def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str,
         },
     }
     if figure is not None:
-        _figure(result, traces, figure)
+        energy_validation_figure(result, traces, figure)
     return result
-
-
-def _figure(result: dict[str, Any], traces: list, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    steady = result["steady"]
-    v = [r["speed_mps"] for r in steady]
-    axes[0].plot(v, [r["model_power_w"] for r in steady], "-", label="paper model (cubic)")
-    axes[0].plot(v, [r["measured_power_w"] for r in steady], "o", label="MuJoCo, measured")
-    axes[0].set(
-        xlabel="speed (m/s)", ylabel="electrical power (W)", title="Steady state: power vs speed"
-    )
-    axes[0].legend()
-    axes[0].grid(alpha=0.3)
-    ax = axes[1]
-    for i, (name, r) in enumerate(traces):
-        slots = np.arange(1, len(r["measured_j"]) + 1)
-        line = ax.plot(slots, r["measured_j"] / 1e3, "-", color=f"C{i}", label=f"{name}")
-        ax.plot(slots, r["model_j"] / 1e3, "--", color=line[0].get_color())
-    ax.set(
-        xlabel="slot",
-        ylabel="energy per slot (kJ)",
-        title="Manoeuvres: measured (solid) vs model (dashed)",
-    )
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-
-
-def format_table(result: dict[str, Any]) -> str:
-    lines = [
-        "Steady state (electrical power, W)",
-        f"{'speed m/s':>10} {'measured':>10} {'model':>10} {'rel.err':>9}",
-    ]
-    for r in result["steady"]:
-        lines.append(
-            f"{r['speed_mps']:>10.1f} {r['measured_power_w']:>10.2f} "
-            f"{r['model_power_w']:>10.2f} {r['rel_error']:>+9.2%}"
-        )
-    lines += [
-        "",
-        "Manoeuvres (energy over the manoeuvre, kJ)",
-        f"{'manoeuvre':<28} {'slots':>5} {'measured':>9} {'model':>9} {'gap':>8}",
-    ]
-    for r in result["maneuvers"]:
-        lines.append(
-            f"{r['name']:<28} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
-            f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%}"
-        )
-    ts = result["timestep"]
-    cands = ", ".join(f"dt={k} s: {v:.2%}" for k, v in ts["candidates"].items())
-    lines += [
-        "",
-        f"Timestep: largest dt with < 1% change when quartered: {ts['dt_s']} s "
-        f"({ts['rel_change_quarter_dt']:.3%}); {cands}",
-    ]
-    return "\n".join(lines)

@@ -2,64 +2,30 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import shutil
 import time
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import imageio_ffmpeg
+import mediapy
 import numpy as np
 from tqdm import tqdm
 
+from iout_mj.agents.policies import load_policy
+from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
+from iout_mj.experiments.figures import trajectory_figure
+from iout_mj.scenarios import ConfigLike, fixed_config
 
 
 def use_bundled_ffmpeg() -> None:
     """Point mediapy at imageio-ffmpeg's static binary unless ffmpeg is on the PATH."""
-    import shutil
-
-    import mediapy
-
     if shutil.which("ffmpeg") is None:
-        import imageio_ffmpeg
-
         mediapy.set_ffmpeg(imageio_ffmpeg.get_ffmpeg_exe())
-
-
-def load_policy(name: str, env: Any, seed: int = 0) -> Any:
-    """A callable `policy(env) -> action`: a baseline name or a trained policy (name or file)."""
-    from iout_mj.baselines import POLICIES, make_policy
-
-    if name in POLICIES:
-        baseline = make_policy(name, seed)
-
-        def act(e: Any, _obs: np.ndarray) -> np.ndarray:
-            return baseline(e.unwrapped.mission)
-
-        act.reset = baseline.reset  # type: ignore[attr-defined]
-        return act
-    from iout_mj.policies import load_trained_policy
-
-    return load_trained_policy(name, env)
-
-
-def run_episode(env: Any, policy: Any, seed: int, on_step: Any = None) -> dict[str, Any]:
-    """Play one episode; returns its metrics (plus the return)."""
-    obs, _ = env.reset(seed=seed)
-    if hasattr(policy, "reset"):
-        policy.reset(seed)
-    ret = 0.0
-    while True:
-        obs, reward, terminated, truncated, info = env.step(policy(env, obs))
-        ret += reward
-        if on_step is not None:
-            on_step(info)
-        if terminated or truncated:
-            metrics = dict(info["metrics"])
-            metrics["return"] = ret
-            if "error" in info:
-                metrics["error"] = info["error"]
-            return metrics
 
 
 def run_mission(
@@ -73,17 +39,14 @@ def run_mission(
     width: int = 960,
     height: int = 540,
     fps: int = 30,
-    config: str | None = None,
+    config: ConfigLike = None,
     slots: int | None = None,
     name: str = "mission",
 ) -> dict[str, Any]:
     """Fly one mission and write `<name>.json`, `<name>_trajectory.png`, and (with `video`)
-    `<name>.mp4` plus its last frame `<name>.png` into `out`."""
-    import dataclasses
-
-    from iout_mj.envs import resolve_config
-
-    cfg = resolve_config(config, n_auvs, n_nodes, "paper")
+    `<name>.mp4` plus its last frame `<name>.png` into `out`. The layout is the scenario's
+    fixed one (`scenarios.fixed_config`): the paper's for K = 7 and 13."""
+    cfg = fixed_config(n_auvs, n_nodes, config)
     if slots is not None:
         if slots < 1:
             raise ValueError(f"slots={slots}: accepted an integer >= 1")
@@ -93,7 +56,7 @@ def run_mission(
         ENV_ID,
         backend=backend,
         config=cfg,
-        render_mode="rgb_array" if video else None,
+        render_mode="rgb_array_list" if video else None,
         width=width,
         height=height,
     )
@@ -104,28 +67,23 @@ def run_mission(
         desc=f"mission {policy} N={n_auvs} K={n_nodes}",
         unit="slot",
     )
-    start = time.perf_counter()
-    frames = 0
     if video:
-        import mediapy
-
         use_bundled_ffmpeg()
-        env.reset(seed=seed)
-        env.render()  # builds the renderer
         writer = mediapy.VideoWriter(out / f"{name}.mp4", shape=(height, width), fps=fps)
         writer.__enter__()
-    last: list[np.ndarray] = []
+    frames: list[np.ndarray] = []
+    count = 0
 
     def on_step(info: dict[str, Any]) -> None:
-        nonlocal frames, last
+        nonlocal frames, count
         bar.update(1)
         if writer is not None:
-            renderer = env.unwrapped._renderer  # type: ignore[attr-defined]
-            last = renderer.take_frames()
-            for f in last:
+            frames = env.render()  # type: ignore[assignment]
+            for f in frames:
                 writer.add_image(f)
-            frames += len(last)
+            count += len(frames)
 
+    start = time.perf_counter()
     try:
         metrics = run_episode(env, act, seed, on_step)
     finally:
@@ -133,12 +91,8 @@ def run_mission(
         if writer is not None:
             writer.__exit__(None, None, None)
     elapsed = time.perf_counter() - start
-    if writer is not None and last:
-        import mediapy
-
-        mediapy.write_image(out / f"{name}.png", last[-1])
-    from iout_mj.figures import trajectory_figure
-
+    if frames:
+        mediapy.write_image(out / f"{name}.png", frames[-1])
     trace = env.unwrapped.mission.trace()  # type: ignore[attr-defined]
     title = f"{policy}, N={n_auvs}, K={n_nodes}, {backend}"
     trajectory_figure(trace, out / f"{name}_trajectory.png", title=title)
@@ -149,7 +103,7 @@ def run_mission(
         "backend": backend,
         "seed": seed,
         "metrics": metrics,
-        "video_frames": frames,
+        "video_frames": count,
         "wall_clock_s": round(elapsed, 2),
     }
     (out / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -1,7 +1,8 @@
 """Offscreen mission rendering (EGL, OSMesa fallback): top-down and chase views, trails, links,
 node state and a text overlay; several frames per slot from the physics substeps.
 
-Nothing here runs unless a frame is asked for: an env without `render_mode` never imports it.
+Built from a model of the scene and a `Mission`: the renderer reads the mission state, never
+the env. Nothing renders unless a frame is asked for.
 """
 
 from __future__ import annotations
@@ -15,16 +16,14 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, ImageDraw, ImageFont
 
-from iout_mj import names, vehicle
-from iout_mj.geometry import wrap_angle
-from iout_mj.physics import joint_addresses
+import iout_mj
+from iout_mj import palette
+from iout_mj.backends.mujoco import names, vehicle
+from iout_mj.backends.mujoco.physics import AUVPhysics, joint_addresses
+from iout_mj.mission import Mission
+from iout_mj.mission.observation import node_energy_level
+from iout_mj.world.geometry import wrap_angle
 
-AUV_COLORS = np.array(
-    [[1.0, 0.85, 0.1, 1], [1.0, 0.3, 0.8, 1], [0.3, 1.0, 0.4, 1], [1.0, 0.5, 0.1, 1]]
-)
-AET_COLOR = np.array([1.0, 0.55, 0.0, 0.9])
-UPLINK_COLOR = np.array([0.1, 0.95, 1.0, 0.9])
-DIM = np.array([0.45, 0.45, 0.45, 0.35])
 TRAIL_POINTS = 400
 MARKER_LENGTH_M = 40.0
 LINK_WIDTH_PX = 3.0
@@ -36,8 +35,6 @@ class RenderError(RuntimeError):
 
 def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
     """A mujoco.Renderer on the backend `iout_mj` chose at import (EGL, else OSMesa)."""
-    import iout_mj
-
     backend = os.environ.get("MUJOCO_GL", "")
     try:
         return mujoco.Renderer(model, height, width, max_geom=20000)
@@ -50,34 +47,28 @@ def make_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Rend
         ) from exc
 
 
-def aoi_color(aoi_frac: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Green (fresh) to red (stale) for AoI / A_max in [0, 1]."""
-    a = np.clip(aoi_frac, 0, 1)[:, None]
-    return np.concatenate(
-        [0.15 + 0.85 * a, 0.85 - 0.7 * a, 0.2 * np.ones_like(a), np.ones_like(a)], axis=1
-    )
-
-
 class MissionRenderer:
-    """Frames of a `MultiAUVEnv` (either backend) at `width` x `height`.
+    """Frames of a mission in a MuJoCo model of its scene, at `width` x `height`.
 
     The frame is the top-down view of the whole area beside a chase view of AUV 0
     (when `width` > `height`), with an overlay of time, mean AoI, Jain, data and energy.
+    With `physics` (the MuJoCo backend) the frames of a slot come from its substeps; without
+    (the kinematic backend) the vehicles are placed along straight lines.
     """
 
-    def __init__(self, env: Any, width: int, height: int, frames_per_slot: int = 8):
-        self.env = env
-        self.mission = env.mission
-        self.cfg = env.cfg
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        mission: Mission,
+        width: int,
+        height: int,
+        physics: AUVPhysics | None = None,
+        frames_per_slot: int = 8,
+    ):
+        self.model, self.mission, self.cfg = model, mission, mission.cfg
         self.frames_per_slot = frames_per_slot
-        physics = env.physics
-        if physics is not None:
-            self.model, self.data = physics.model.ptr, physics.data.ptr
-            self._physics = physics
-        else:  # kinematic backend: the same scene, vehicles placed kinematically
-            self.model = vehicle.build_model(self.cfg)
-            self.data = mujoco.MjData(self.model)
-            self._physics = None
+        self._physics = physics
+        self.data = physics.data.ptr if physics is not None else mujoco.MjData(model)
         self._view_data = mujoco.MjData(self.model)
         self.top_size = min(width, height)
         self.width, self.height = width, height
@@ -85,11 +76,14 @@ class MissionRenderer:
         chase_w = width - self.top_size
         self.chase = make_renderer(self.model, height, chase_w) if chase_w >= 64 else None
         self._qx, self._qy, self._qyaw = joint_addresses(self.model, self.mission.n_auvs)
+        self._nodes = [model.body(names.node_name(k)).id for k in range(mission.n_nodes)]
         self._chase_cam = names.auv_prefix(0) + names.CHASE_CAMERA
         self._font = ImageFont.load_default()
         self.reset()
 
     def reset(self) -> None:
+        """Start a new episode: clear trails and frames, place this episode's node markers."""
+        self.model.body_pos[self._nodes, :2] = self.mission.network.nodes_m
         self.trails: list[list[NDArray[np.float64]]] = [[] for _ in range(self.mission.n_auvs)]
         self._slot_start_pose = self._pose_now()
         self._pending: list[NDArray[np.uint8]] = []
@@ -97,7 +91,7 @@ class MissionRenderer:
     # ------------------------------------------------------------------ poses
     def _pose_now(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         m = self.mission
-        return m.positions_m.copy(), m.headings_rad.copy()
+        return m.state.positions_m.copy(), m.state.headings_rad.copy()
 
     def _substep_poses(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """Poses for the frames of the slot that just ended."""
@@ -129,6 +123,10 @@ class MissionRenderer:
                 self.trails[i].append(xy[i].copy())
             self._pending.append(self._compose(xy, yaw))
         self._slot_start_pose = self._pose_now()
+
+    def record_frame(self) -> None:
+        """Keep the current frame (the first frame of an episode)."""
+        self._pending.append(self.frame())
 
     def take_frames(self) -> list[NDArray[np.uint8]]:
         """Frames rendered since the last call."""
@@ -188,9 +186,8 @@ class MissionRenderer:
         z_auv = vehicle.AUV_DEPTH_M
         z_bed = vehicle.SEABED_DEPTH_M + 4.5
         # Nodes: colour = AoI, size = stored energy (log scale).
-        energy = np.log10(1 + net.energy_j / 1e-3)
-        radius = vehicle.NODE_RADIUS_M * (0.8 + 0.35 * energy)
-        colors = aoi_color(net.aoi / self.cfg.network.aoi_max)
+        radius = vehicle.NODE_RADIUS_M * (0.8 + 1.75 * node_energy_level(net.energy_j))
+        colors = palette.aoi_rgba(net.aoi / self.cfg.network.aoi_max)
         for k, (x, y) in enumerate(net.nodes_m):
             g = self._add(scene)
             if g is None:
@@ -208,17 +205,17 @@ class MissionRenderer:
         if log.aet_nodes:
             aet, up, ok = log.aet_nodes[-1], log.uplink_nodes[-1], log.uplink_ok[-1]
             for i in range(mission.n_auvs):
-                if mission.docked[i] and len(log.positions_m) > 2:
+                if mission.state.docked[i] and len(log.positions_m) > 2:
                     continue
                 p = np.array([xy[i, 0], xy[i, 1], z_auv])
                 q_aet = np.array([*net.nodes_m[aet[i]], z_bed])
                 q_up = np.array([*net.nodes_m[up[i]], z_bed + 1])
-                self._line(scene, p, q_aet, AET_COLOR, LINK_WIDTH_PX)
+                self._line(scene, p, q_aet, palette.AET_RGBA, LINK_WIDTH_PX)
                 self._line(
                     scene,
                     p + np.array([0.0, 0.0, 1.0]),
                     q_up,
-                    UPLINK_COLOR if ok[i] else DIM,
+                    palette.UPLINK_RGBA if ok[i] else palette.FAILED_RGBA,
                     LINK_WIDTH_PX,
                 )
         # Trails and (top view) large heading markers, since a 3 m hull is a few pixels there.
@@ -226,7 +223,7 @@ class MissionRenderer:
             trail = self.trails[i][-TRAIL_POINTS:]
             step = max(1, len(trail) // 200)
             pts = trail[::step] + ([trail[-1]] if trail else [])
-            color = AUV_COLORS[i % len(AUV_COLORS)]
+            color = palette.AUV_RGBA[i % len(palette.AUV_RGBA)]
             for a, b in itertools.pairwise(pts):
                 self._line(scene, np.array([*a, z_auv]), np.array([*b, z_auv]), color, 2.0)
             if top:
@@ -248,13 +245,13 @@ class MissionRenderer:
         """Text on the chase view (or on the top view when there is no chase view)."""
         m = self.mission
         slot_s = self.cfg.scenario.slot_s
-        energy_kj = ", ".join(f"{e / 1e3:.0f}" for e in m.propulsion_energy_j)
+        energy_kj = ", ".join(f"{e / 1e3:.0f}" for e in m.state.propulsion_energy_j)
         lines = [
-            f"t = {m.slot * slot_s:5.0f} s  (slot {m.slot}/{self.cfg.scenario.horizon_slots})",
+            f"t = {m.state.slot * slot_s:5.0f} s  (slot {m.state.slot}/{self.cfg.scenario.horizon_slots})",
             f"mean AoI {m.network.mean_aoi:5.1f}   Jain {m.network.jain:4.2f}",
             f"data {m.network.delivered_bits / 1e6:6.1f} Mbit",
             f"energy/AUV {energy_kj} kJ",
-            "docked " + " ".join("Y" if d else "-" for d in m.docked),
+            "docked " + " ".join("Y" if d else "-" for d in m.state.docked),
             "orange AET, cyan uplink (grey: failed)",
             "node colour: AoI, size: stored energy",
         ]

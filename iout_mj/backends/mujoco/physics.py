@@ -19,9 +19,9 @@ from dm_control.rl.control import PhysicsError
 from mujoco import rollout
 from numpy.typing import NDArray
 
-from iout_mj import names, vehicle
+from iout_mj.backends.mujoco import names, vehicle
 from iout_mj.config import Config
-from iout_mj.geometry import norm_xy, wrap_angle
+from iout_mj.world.geometry import norm_xy, wrap_angle
 
 FloatArray = NDArray[np.float64]
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -155,6 +155,12 @@ class AUVPhysics(engine.Physics):
         m.opt.wind[:2] = current_mps
 
     # ------------------------------------------------------------------ stepping
+    @property
+    def stepper(self) -> Stepper:
+        """The Stepper of this scene (its `recorded` list is the benchmark's hook)."""
+        assert self._stepper is not None, "used after free()"
+        return self._stepper
+
     def step(self, nstep: int = 1) -> None:
         """Advance `nstep` substeps in C and integrate actuator power over each of them."""
         assert self._stepper is not None, "stepped after free()"
@@ -193,8 +199,9 @@ class Stepper:
         self._scratch: list[mujoco.MjData] = []
         self._shape = (0, 0)  # (scenes, nstep) the buffers below are sized for
         self._buffers: tuple[FloatArray, ...] = ()
-        self.inputs: tuple[FloatArray, ...] = ()
-        """Start states (B, nstate) and controls (B, nstep, nu) of the last step."""
+        self.recorded: list[tuple[FloatArray, FloatArray]] | None = None
+        """Set to a list to keep every scene's (start state, first control) of every step (the
+        benchmark replays them through plain `mj_step`)."""
 
     def step(self, physics: Sequence[AUVPhysics], nstep: int) -> NDArray[np.bool_]:
         """Advance every physics `nstep` substeps; returns which of them diverged (MuJoCo
@@ -212,10 +219,11 @@ class Stepper:
                 np.empty((len(physics), nstep, m.nsensordata)),
             )
         state0, ctrl, state, sensordata = self._buffers
-        self.inputs = (state0, ctrl)
         for i, p in enumerate(physics):
             mujoco.mj_getState(models[i], p.data.ptr, state0[i], _STATE_SPEC)
             ctrl[i] = p.data.ptr.ctrl
+        if self.recorded is not None:
+            self.recorded.extend((state0[i].copy(), ctrl[i, 0].copy()) for i in range(len(physics)))
         self._rollout.rollout(
             models,
             self._scratch,

@@ -2,7 +2,16 @@
 
 from pathlib import Path
 
-ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
+
+def _assets_dir() -> Path:
+    """`iout_mj/assets` in an installed wheel (the build maps the top-level `assets/` there),
+    else the checkout's top-level `assets/` (source tree, editable install)."""
+    package = Path(__file__).resolve().parents[2]
+    installed = package / "assets"
+    return installed if installed.is_dir() else package.parent / "assets"
+
+
+ASSETS_DIR = _assets_dir()
 AUV_XML = ASSETS_DIR / "auv.xml"
 ARENA_XML = ASSETS_DIR / "arena.xml"
 

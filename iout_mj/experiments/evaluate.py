@@ -1,8 +1,8 @@
 """Seeded evaluation of policies over (N, K) grids, in parallel worker processes.
 
 Episode e of every (policy, N, K) uses seed S + e, so every policy starts from the same states.
-K = 7 and 13 use the paper's layouts; other K a seeded random layout fixed per K
-(`random_layout(K, seed=K)`), the same for every policy and episode.
+The layout of (N, K) is `scenarios.fixed_config`: the paper's for K = 7 and 13, else one
+seeded layout per K, the same for every policy and episode.
 """
 
 from __future__ import annotations
@@ -15,38 +15,22 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from iout_mj.config import PAPER_LAYOUTS, Config, make_config
+from iout_mj.agents.policies import load_policy
+from iout_mj.agents.rollout import run_episode
+from iout_mj.envs import ENV_ID
+from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
+from iout_mj.scenarios import fixed_config
 
-SUMMARY_KEYS = (
-    "mean_aoi",
-    "mean_aoi_horizon",
-    "objective",
-    "jain",
-    "delivered_bits",
-    "propulsion_energy_j",
-    "docking_rate",
-    "collisions",
-)
 TRACE_NODES = 7
 
 
-def scenario_config(n_auvs: int, n_nodes: int, base: Config | None = None) -> Config:
-    """The evaluation scenario for (N, K)."""
-    layout = "paper" if n_nodes in PAPER_LAYOUTS else "random"
-    return make_config(n_auvs, n_nodes, layout, seed=n_nodes, base=base)
-
-
 def _episode(job: tuple[str, int, int, int, str, bool]) -> dict[str, Any]:
-    import gymnasium as gym
-
-    from iout_mj.envs import ENV_ID
-    from iout_mj.missions import load_policy, run_episode
-
     policy_name, n_auvs, n_nodes, seed, backend, keep_trace = job
-    env = gym.make(ENV_ID, backend=backend, config=scenario_config(n_auvs, n_nodes))
+    env = gym.make(ENV_ID, backend=backend, config=fixed_config(n_auvs, n_nodes))
     policy = load_policy(policy_name, env, seed)
     metrics = run_episode(env, policy, seed)
     row: dict[str, Any] = {
@@ -65,13 +49,8 @@ def _episode(job: tuple[str, int, int, int, str, bool]) -> dict[str, Any]:
 
 def _check_policies(policies: list[str], n_auvs: list[int], nodes: list[int], backend: str) -> None:
     """Fail early (before any worker starts) on unknown or incompatible policies."""
-    import gymnasium as gym
-
-    from iout_mj.envs import ENV_ID
-    from iout_mj.missions import load_policy
-
     for name, n, k in product(policies, n_auvs, nodes):
-        env = gym.make(ENV_ID, backend="kinematic", config=scenario_config(n, k))
+        env = gym.make(ENV_ID, backend="kinematic", config=fixed_config(n, k))
         load_policy(name, env)
         env.close()
 
@@ -83,16 +62,7 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
         groups.setdefault((e["policy"], e["n_auvs"], e["n_nodes"], e["backend"]), []).append(e)
     rows = []
     for (policy, n, k, backend), eps in sorted(groups.items()):
-        values = {
-            "mean_aoi": [e["mean_aoi"] for e in eps],
-            "mean_aoi_horizon": [e["mean_aoi_horizon"] for e in eps],
-            "objective": [e["objective"] for e in eps],
-            "jain": [e["jain"] for e in eps],
-            "delivered_bits": [e["delivered_bits"] for e in eps],
-            "propulsion_energy_j": [float(np.mean(e["propulsion_energy_j"])) for e in eps],
-            "docking_rate": [float(all(e["docked"])) for e in eps],
-            "collisions": [e["collisions"] for e in eps],
-        }
+        summaries = [episode_summary(e) for e in eps]
         row: dict[str, Any] = {
             "policy": policy,
             "n_auvs": n,
@@ -101,8 +71,9 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "episodes": len(eps),
         }
         for key in SUMMARY_KEYS:
-            row[key] = float(np.mean(values[key]))
-            row[key + "_std"] = float(np.std(values[key]))
+            values = [e[key] for e in summaries]
+            row[key] = float(np.mean(values))
+            row[key + "_std"] = float(np.std(values))
         rows.append(row)
     return rows
 

@@ -1,0 +1,1 @@
+"""How vehicles move: the paper's kinematics (`kinematic`) and MuJoCo physics (`mujoco`)."""

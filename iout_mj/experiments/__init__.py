@@ -1,0 +1,2 @@
+"""Experiments on top of the envs and agents: missions, evaluation, figures, energy validation,
+benchmarks."""

@@ -1,0 +1,80 @@
+"""Tables of a benchmark run (`iout-mj bench`, `--markdown`, `--from-json`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+def format_table(r: dict[str, Any]) -> str:
+    lines = [
+        f"machine: {r['machine']['cpus']} CPUs, Python {r['machine']['python']}; physics "
+        f"dt {r['timestep_s']} s, {r['substeps_per_slot']} substeps per 25 s slot",
+        "",
+    ]
+    lines.append(
+        "slot_vs_raw (MuJoCo env steps/s over plain mj_step(nstep) from the same states; "
+        f"target >= 0.9): one gymnasium env | PhysicsVecEnv of {PHYSICS_BATCH}, one thread"
+    )
+    b = f"batch_{PHYSICS_BATCH}_"
+    for key, v in r["slot_vs_raw"].items():
+        lines.append(
+            f"  {key:<7} env {v['env_steps_per_s']:6.1f}/s raw {v['raw_slots_per_s']:6.1f}/s "
+            f"ratio {v['ratio']:.3f} | env {v[b + 'env_steps_per_s']:6.1f}/s raw "
+            f"{v[b + 'raw_slots_per_s']:6.1f}/s ratio {v[b + 'ratio']:.3f}"
+        )
+    lines.append(
+        f"kinematic_steps_per_s (one core, KinematicVecEnv of {r['kinematic_batch']} envs; "
+        "target >= 15000 for N2_K13) [one env through gymnasium]"
+    )
+    for key, v in r["kinematic_steps_per_s"].items():
+        lines.append(f"  {key:<7} {v:10.0f}   [{r['kinematic_single_env_steps_per_s'][key]:7.0f}]")
+    p = r["ppo_fps"]
+    lines.append(
+        f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {p['physics']:.0f} / trivial "
+        f"{p['trivial']:.0f} steps/s; target >= 0.6); kinematic batch {p['kinematic']:.0f} steps/s"
+    )
+    lines.append(f"subproc_scaling {r['subproc_scaling']:.3f} (2 workers / 1; target >= 1.8)")
+    lines.append(f"thread_scaling {r['thread_scaling']:.3f} (PhysicsVecEnv, 2 rollout threads / 1)")
+    lines.append(f"render_fps {r['render_fps']:.1f} (640x480, top-down + chase, overlays)")
+    mem = r["memory"]
+    lines.append(
+        f"memory (peak RSS): one env {mem['one_env_mb']:.0f} MB; PPO on the MuJoCo backend "
+        f"with {mem['training_envs']} envs (one process) {mem['training_mb']:.0f} MB"
+    )
+    return "\n".join(lines)
+
+
+def format_markdown(r: dict[str, Any]) -> str:
+    """The README's table of one run."""
+    b = f"batch_{PHYSICS_BATCH}_"
+    rows = ["| benchmark | value | target |", "| --- | --- | --- |"]
+    for key, v in r["slot_vs_raw"].items():
+        rows.append(
+            f"| slot_vs_raw {key}, one env (env {v['env_steps_per_s']:.0f} / raw "
+            f"{v['raw_slots_per_s']:.0f} slots/s) | {v['ratio']:.3f} | >= 0.9 |"
+        )
+        rows.append(
+            f"| slot_vs_raw {key}, PhysicsVecEnv of {PHYSICS_BATCH} on one thread (env "
+            f"{v[b + 'env_steps_per_s']:.0f} / raw {v[b + 'raw_slots_per_s']:.0f}) "
+            f"| {v[b + 'ratio']:.3f} | >= 0.9 |"
+        )
+    single = r["kinematic_single_env_steps_per_s"]
+    for key, v in r["kinematic_steps_per_s"].items():
+        target = ">= 15,000" if key == "N2_K13" else ""
+        rows.append(
+            f"| kinematic_steps_per_s {key}, KinematicVecEnv of {r['kinematic_batch']} "
+            f"[one env] | {v:,.0f} [{single[key]:,.0f}] | {target} |"
+        )
+    p, mem = r["ppo_fps"], r["memory"]
+    rows += [
+        f"| ppo_fps_ratio (physics {p['physics']:.0f} / trivial {p['trivial']:.0f} steps/s; "
+        f"kinematic {p['kinematic']:.0f}) | {r['ppo_fps_ratio']:.3f} | >= 0.6 |",
+        f"| subproc_scaling (2 worker processes / 1) | {r['subproc_scaling']:.3f} | >= 1.8 |",
+        f"| thread_scaling (PhysicsVecEnv, 2 rollout threads / 1) | {r['thread_scaling']:.3f} | |",
+        f"| render_fps 640x480 (top-down + chase, trails, links, overlay) | "
+        f"{r['render_fps']:.1f} | |",
+        f"| peak resident memory, one MuJoCo env (N=2, K=7) | {mem['one_env_mb']:.0f} MB "
+        "| < 200 MB |",
+        f"| peak resident memory, PPO on the MuJoCo backend, {mem['training_envs']} envs in one "
+        f"process | {mem['training_mb']:.0f} MB | |",
+    ]
+    return "\n".join(rows)

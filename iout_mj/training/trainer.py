@@ -1,0 +1,212 @@
+"""PPO training (stable-baselines3) through the phases of a `TrainConfig`, with checkpoints,
+held-out evaluation and `--resume` (same step count, learning-rate schedule and
+normalisation statistics)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+import yaml
+from stable_baselines3 import PPO
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+from tqdm import tqdm
+
+from iout_mj.agents.policies import model_policy
+from iout_mj.agents.rollout import run_episode
+from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
+from iout_mj.mission.stats import episode_summary
+from iout_mj.schema import ConfigError
+from iout_mj.training.callbacks import EvalCheckpointCallback, MissionLoggerCallback
+from iout_mj.training.checkpoints import RunState, save_checkpoint
+from iout_mj.training.config import TrainConfig
+
+HELD_OUT_SEED = 1_000_000
+"""Evaluation seeds start here; training episodes draw theirs from the training seed."""
+
+
+def scenario_env(cfg: TrainConfig, backend: str) -> Any:
+    """The gymnasium env of the config's scenario."""
+    return gym.make(
+        ENV_ID, n_auvs=cfg.n_auvs, n_nodes=cfg.n_nodes, backend=backend, layout=cfg.layout
+    )
+
+
+def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
+    """A monitored env for training (a picklable factory target)."""
+    env = scenario_env(cfg, backend)
+    env.reset(seed=seed)
+    return Monitor(env)
+
+
+def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bool) -> Any:
+    """The training VecEnv: one batch of `n_envs` environments in this process, for either
+    backend; with `parallel`, the MuJoCo rollout runs on one C thread per core."""
+    args = (n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout)
+    if backend == "kinematic":
+        return VecMonitor(KinematicVecEnv(*args, seed=seed))
+    threads = min(n_envs, os.cpu_count() or 1) if parallel else 0
+    return VecMonitor(PhysicsVecEnv(*args, seed=seed, nthread=threads))
+
+
+def _lr_schedule(cfg: TrainConfig) -> Any:
+    start, end = cfg.learning_rate, cfg.learning_rate_final
+
+    def schedule(progress_remaining: float) -> float:
+        return end + (start - end) * progress_remaining
+
+    return schedule
+
+
+def evaluate_model(
+    model: Any, stats: Any, cfg: TrainConfig, backend: str, episodes: int, seed: int = HELD_OUT_SEED
+) -> dict[str, float]:
+    """Deterministic episodes on held-out seeds: the mean episode summary and return."""
+    env = scenario_env(cfg, backend)
+    policy = model_policy(model, stats)
+    rows = []
+    for e in range(episodes):
+        metrics = run_episode(env, policy, seed + e)
+        rows.append({"return": metrics["return"], **episode_summary(metrics)})
+    env.close()
+    return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+
+
+def selection_score(metrics: dict[str, float]) -> float:
+    """Model selection: docking first, then low AoI over the whole horizon (so that docking
+    early, which shortens the averaging window of the mission mean, does not pay)."""
+    return -metrics["mean_aoi_horizon"] - 100.0 * max(0.0, 0.95 - metrics["docking_rate"])
+
+
+def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> Any:
+    """A fresh PPO with the config's hyperparameters on `venv`."""
+    return PPO(
+        "MlpPolicy",
+        venv,
+        learning_rate=_lr_schedule(cfg),
+        n_steps=cfg.n_steps,
+        batch_size=cfg.batch_size,
+        n_epochs=cfg.n_epochs,
+        gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_range,
+        ent_coef=cfg.ent_coef,
+        seed=cfg.seed,
+        device="cpu",
+        verbose=0,
+        policy_kwargs={"net_arch": list(cfg.net_arch)},
+        tensorboard_log=None if tensorboard is None else str(tensorboard),
+    )
+
+
+def _start(cfg: TrainConfig, out: Path, resume: bool) -> RunState:
+    """The state to start from: a fresh run, or the saved one with `resume`."""
+    out.mkdir(parents=True, exist_ok=True)
+    if resume:
+        if not ((out / "state.json").is_file() and (out / "last" / "model.zip").is_file()):
+            raise FileNotFoundError(f"nothing to resume in {out}: no last/ checkpoint")
+        if TrainConfig.load(out / "config.yaml") != cfg:
+            raise ConfigError(f"--resume with a different config than {out / 'config.yaml'}")
+        return RunState.load(out / "state.json")
+    if (out / "last").exists():
+        raise FileExistsError(f"{out} already holds a run: use --resume, or another --out")
+    (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    return RunState()
+
+
+def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path, resume: bool) -> Any:
+    """The model of a phase on `venv`: loaded from `last/` when resuming, new for the first
+    phase, else the previous phase's model and statistics on the new backend."""
+    if model is None and resume and (out / "last").exists():
+        venv = VecNormalize.load(str(out / "last" / "vecnormalize.pkl"), venv)
+        schedule = _lr_schedule(cfg)
+        return PPO.load(
+            out / "last" / "model.zip",
+            env=venv,
+            device="cpu",
+            custom_objects={"learning_rate": schedule, "lr_schedule": schedule},
+        )
+    normalized = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
+    if model is None:
+        return new_model(cfg, normalized, out / "tb")
+    stats = model.get_vec_normalize_env()
+    normalized.obs_rms, normalized.ret_rms = stats.obs_rms, stats.ret_rms
+    stats.close()
+    model.set_env(normalized)
+    return model
+
+
+def train(
+    cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = True, parallel: bool = True
+) -> RunState:
+    """Train PPO through every phase; checkpoints in `out`."""
+    torch.set_num_threads(cfg.torch_threads)
+    state = _start(cfg, out, resume)
+    bar = tqdm(
+        total=cfg.total_timesteps,
+        initial=state.num_timesteps,
+        unit="step",
+        desc=cfg.name,
+        disable=not progress,
+    )
+    phase_start = sum(p.timesteps for p in cfg.phases[: state.phase])
+    model: Any = None
+    backend = cfg.phases[state.phase].backend if state.phase < len(cfg.phases) else ""
+
+    def checkpoint(model: Any) -> None:
+        stats = model.get_vec_normalize_env()
+        metrics = evaluate_model(model, stats, cfg, backend, cfg.eval_episodes)
+        if getattr(model, "_logger", None) is not None:  # absent until learn() ran
+            for k, v in metrics.items():
+                model.logger.record(f"eval/{k}", v)
+        state.num_timesteps = model.num_timesteps
+        entry = {"num_timesteps": model.num_timesteps, "phase": state.phase, "backend": backend}
+        entry.update(metrics)
+        state.history.append(entry)
+        score = selection_score(metrics)
+        if score > state.best_score:
+            state.best_score = score
+            save_checkpoint(model, stats, out / "best", cfg, {"eval": entry})
+        save_checkpoint(model, stats, out / "last", cfg, {"eval": entry})
+        state.save(out / "state.json")
+
+    for index in range(state.phase, len(cfg.phases)):
+        phase = cfg.phases[index]
+        backend = phase.backend
+        phase_end = phase_start + phase.timesteps
+        venv = vec_env(cfg, backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
+        model = _phase_model(model, cfg, venv, out, resume or index > 0)
+        remaining = phase_end - model.num_timesteps
+        if remaining > 0:
+            callbacks = [
+                MissionLoggerCallback(model.num_timesteps),
+                EvalCheckpointCallback(
+                    cfg.eval_every_steps,
+                    phase_end,
+                    model.num_timesteps,
+                    checkpoint,
+                    lambda n: bar.update(n - bar.n),
+                ),
+            ]
+            # SB3 counts the schedule over num_timesteps / (num_timesteps + remaining); the
+            # total must span all phases, so learn() is told the overall end (the callback
+            # ends the phase).
+            model.learn(
+                total_timesteps=cfg.total_timesteps - model.num_timesteps,
+                reset_num_timesteps=False,
+                callback=callbacks,
+                tb_log_name="ppo",
+                progress_bar=False,
+            )
+        state.phase = index + 1
+        checkpoint(model)
+        phase_start = phase_end
+    bar.close()
+    if model is not None:
+        model.get_env().close()
+    return state

@@ -1,0 +1,1 @@
+"""The paper's equations in numpy (no MuJoCo): geometry, acoustics, sensor network, propulsion."""
