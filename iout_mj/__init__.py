@@ -41,7 +41,7 @@ def _register() -> None:
     import gymnasium
 
     if "iout_mj/MultiAUV-v0" not in gymnasium.registry:
-        gymnasium.register(id="iout_mj/MultiAUV-v0", entry_point="iout_mj.envs:MultiAUVEnv")
+        gymnasium.register(id="iout_mj/MultiAUV-v0", entry_point="iout_mj.envs.gym_env:MultiAUVEnv")
 
 
 _choose_gl_backend()

@@ -5,14 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 AUV_RGBA = np.array(
-    [[0.9, 0.66, 0.0, 1], [0.84, 0.18, 0.6, 1], [0.17, 0.63, 0.17, 1], [1.0, 0.5, 0.05, 1]]
+    [[1.0, 0.85, 0.1, 1], [1.0, 0.3, 0.8, 1], [0.3, 1.0, 0.4, 1], [1.0, 0.5, 0.1, 1]]
 )
 """AUV i has colour AUV_RGBA[i % 4] everywhere."""
 AET_RGBA = np.array([1.0, 0.55, 0.0, 0.9])
 UPLINK_RGBA = np.array([0.1, 0.95, 1.0, 0.9])
 FAILED_RGBA = np.array([0.45, 0.45, 0.45, 0.35])
-NODE_RGBA = np.array([0.12, 0.47, 0.71, 1.0])
-DOCK_RGBA = np.array([0.17, 0.63, 0.17, 0.25])
 
 
 def auv_rgba(i: int) -> tuple[float, ...]:

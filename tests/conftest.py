@@ -1,10 +1,18 @@
-"""Shared fixtures."""
+"""Shared fixtures: configs, RNGs, scenarios and the command line."""
+
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import iout_mj  # noqa: F401  (chooses the GL backend and registers the env first)
-from iout_mj.config import Config, make_config
+from iout_mj.config import Config
+from iout_mj.scenarios import make_config
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture
@@ -15,3 +23,19 @@ def cfg() -> Config:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(0)
+
+
+def run_cli(*args: str, check: bool = True, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """`iout-mj ARGS` in a fresh interpreter, as a user runs it."""
+    return subprocess.run(
+        [sys.executable, "-m", "iout_mj.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        check=check,
+        cwd=cwd,
+    )
+
+
+@pytest.fixture
+def cli() -> Callable[..., subprocess.CompletedProcess]:
+    return run_cli

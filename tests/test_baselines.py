@@ -1,17 +1,18 @@
 """Baselines and the evaluation harness."""
 
 import json
-import subprocess
-import sys
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 from iout_mj.agents.baselines import POLICIES, make_policy
+from iout_mj.agents.policies import load_policy
+from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
-from iout_mj.experiments.evaluate import SUMMARY_KEYS, evaluate, scenario_config
-from iout_mj.experiments.mission import load_policy, run_episode
+from iout_mj.experiments.evaluate import evaluate
+from iout_mj.mission.stats import SUMMARY_KEYS
+from iout_mj.scenarios import fixed_config as scenario_config
 
 
 @pytest.mark.parametrize("name", sorted(POLICIES))
@@ -55,33 +56,10 @@ def test_planner_beats_random_walk_on_aoi():
         assert aoi[("planner", n)] < 0.8 * aoi[("random-walk", n)]
 
 
-def test_evaluate_json_has_every_key_and_figures(tmp_path):
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "iout_mj.cli",
-            "evaluate",
-            "--policy",
-            "greedy",
-            "planner",
-            "--n-auvs",
-            "1",
-            "2",
-            "--nodes",
-            "5",
-            "7",
-            "--episodes",
-            "2",
-            "--backend",
-            "kinematic",
-            "--json",
-            "--out",
-            str(tmp_path),
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
+def test_evaluate_json_has_every_key_and_figures(tmp_path, cli):
+    out = cli(
+        *("evaluate", "--policy", "greedy", "planner", "--n-auvs", "1", "2", "--nodes", "5", "7"),
+        *("--episodes", "2", "--backend", "kinematic", "--json", "--out", tmp_path),
     )
     rows = json.loads(out.stdout)
     assert len(rows) == 2 * 2 * 2
@@ -91,12 +69,7 @@ def test_evaluate_json_has_every_key_and_figures(tmp_path):
         assert keys <= set(r)
         assert r["episodes"] == 2
     assert (tmp_path / "results.csv").read_text().startswith("policy,n_auvs,n_nodes")
-    out = subprocess.run(
-        [sys.executable, "-m", "iout_mj.cli", "figures", "--results", str(tmp_path)],
-        capture_output=True,
-        text=True,
-        check=True,
-    )
+    out = cli("figures", "--results", tmp_path)
     pngs = out.stdout.split()
     assert len(pngs) == 5
     for p in pngs:
@@ -106,16 +79,16 @@ def test_evaluate_json_has_every_key_and_figures(tmp_path):
 
 
 def test_same_seed_same_start_for_every_policy():
-    starts = []
+    paths = []
     for name in ("greedy", "planner"):
         env = gym.make(ENV_ID, backend="kinematic", n_auvs=2)
-        env.reset(seed=5)
-        starts.append(env.unwrapped.mission.state.positions_m.copy())
-        make_policy(name)
-    assert np.array_equal(*starts)
+        run_episode(env, load_policy(name, env, 5), seed=5)
+        paths.append(np.array(env.unwrapped.mission.trace()["positions_m"]))
+    assert np.array_equal(paths[0][0], paths[1][0])  # the same start state ...
+    assert not np.array_equal(paths[0][1], paths[1][1])  # ... flown differently
 
 
-def test_bad_policy_names_and_files(tmp_path):
+def test_bad_policy_names_and_files(tmp_path, cli):
     env = gym.make(ENV_ID, backend="kinematic")
     with pytest.raises(ValueError, match="unknown policy 'best'"):
         load_policy("best", env)
@@ -123,9 +96,5 @@ def test_bad_policy_names_and_files(tmp_path):
     bad.write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="cannot load policy"):
         load_policy(str(bad), env)
-    out = subprocess.run(
-        [sys.executable, "-m", "iout_mj.cli", "evaluate", "--policy", "nope", "--episodes", "1"],
-        capture_output=True,
-        text=True,
-    )
+    out = cli("evaluate", "--policy", "nope", "--episodes", "1", check=False)
     assert out.returncode == 2 and "unknown policy 'nope'" in out.stderr

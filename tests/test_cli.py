@@ -1,22 +1,13 @@
 """The `iout-mj` command line, run as a user would."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
+from conftest import ROOT
+from conftest import run_cli as run
 
-from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def run(*args, check=True):
-    return subprocess.run(
-        [sys.executable, "-m", "iout_mj.cli", *args], capture_output=True, text=True, check=check
-    )
+from iout_mj.world import acoustics
 
 
 def test_link_budget_json():

@@ -5,16 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from iout_mj.config import (
-    PAPER_LAYOUTS,
-    AcousticsConfig,
-    Config,
-    ConfigError,
-    MotionConfig,
-    ScenarioConfig,
-    make_config,
-    random_layout,
-)
+from iout_mj.config import PAPER_LAYOUTS, Config, MotionConfig, RewardWeights
+from iout_mj.scenarios import fixed_config, make_config, random_layout, resolve_config
+from iout_mj.schema import ConfigError
 
 
 def test_paper_defaults():
@@ -95,5 +88,26 @@ def test_make_config_errors():
 def test_frozen():
     with pytest.raises(AttributeError):
         MotionConfig().v_max_mps = 5  # type: ignore[misc]
-    assert ScenarioConfig().n_nodes == 7
-    assert AcousticsConfig().n_hydrophones == 4
+
+
+def test_reward_weights_carry_their_signs():
+    w = RewardWeights()
+    costs = ("aoi", "fairness", "boundary", "stall", "infeasible_uplink", "collision")
+    assert all(getattr(w, name) < 0 for name in (*costs, "undocked_at_end"))
+    cfg = Config.from_dict({"reward": {"weights": {"aoi": -0.5}, "stall_distance_m": 2.0}})
+    assert cfg.reward.weights.aoi == -0.5 and cfg.reward.stall_distance_m == 2.0
+    with pytest.raises(ConfigError, match="unknown key"):
+        Config.from_dict({"reward": {"aoi": 0.1}})  # weights live under reward.weights
+    with pytest.raises(ConfigError, match="weights.aoi"):
+        Config.from_dict({"reward": {"weights": {"aoi": "high"}}})
+
+
+def test_one_scenario_resolution_for_every_entry_point():
+    assert resolve_config(None, 1, 13).scenario.nodes_m == make_config(1, 13).scenario.nodes_m
+    fixed = fixed_config(2, 5)  # evaluation, mission, bench: one seeded layout per K
+    assert fixed.scenario.nodes_m == make_config(2, 5, "random", seed=5).scenario.nodes_m
+    assert fixed_config(2, 7) == make_config(2, 7)
+    base = Config.from_dict({"motion": {"hotel_power_w": 20}})
+    assert fixed_config(1, 9, base).motion.hotel_power_w == 20.0
+    with pytest.raises(ConfigError, match="layout='grid'"):
+        resolve_config(None, 2, 7, "grid")

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig, NetworkConfig
+from iout_mj.world import acoustics
 from iout_mj.world.network import SensorNetwork, jain_index
 
 NODES = [(100.0, 100.0), (900.0, 900.0)]

@@ -4,6 +4,8 @@ import os
 import subprocess
 import sys
 
+import gymnasium as gym
+import imageio_ffmpeg
 import numpy as np
 import pytest
 
@@ -14,8 +16,6 @@ pytestmark = pytest.mark.slow
 
 @pytest.mark.parametrize("backend", ["mujoco", "kinematic"])
 def test_short_clip(tmp_path, backend):
-    import imageio_ffmpeg
-
     summary = run_mission(
         policy="planner",
         n_auvs=2,
@@ -31,8 +31,8 @@ def test_short_clip(tmp_path, backend):
     meta = next(reader)
     w, h = meta["size"]
     video = np.stack([np.frombuffer(f, np.uint8).reshape(h, w, 3) for f in reader])
-    assert video.shape == (3 * 8, 160, 320, 3)  # 8 frames per slot
-    assert summary["video_frames"] == 24
+    assert video.shape == (1 + 3 * 8, 160, 320, 3)  # the start, then 8 frames per slot
+    assert summary["video_frames"] == 25
     assert (tmp_path / "mission.png").exists()
     diffs = [
         np.abs(video[i + 1].astype(int) - video[i].astype(int)).mean()
@@ -48,12 +48,25 @@ def test_short_clip(tmp_path, backend):
 
 
 def test_render_mode_rgb_array():
-    import gymnasium as gym
-
     env = gym.make("iout_mj/MultiAUV-v0", render_mode="rgb_array", width=200, height=120)
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (120, 200, 3) and frame.dtype == np.uint8
+    env.close()
+
+
+@pytest.mark.parametrize("backend", ["mujoco", "kinematic"])
+def test_render_mode_rgb_array_list_gives_every_frame_since_the_last_call(backend):
+    env = gym.make(
+        "iout_mj/MultiAUV-v0", backend=backend, render_mode="rgb_array_list", width=96, height=64
+    )
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    frames = env.render()
+    assert len(frames) == 1 + 8 and frames[0].shape == (64, 96, 3)  # the start, one slot
+    assert env.render() == []  # taken
+    env.step(env.action_space.sample())
+    assert len(env.render()) == 8
     env.close()
 
 
@@ -77,36 +90,13 @@ def test_missing_gl_library_gives_the_documented_message():
     assert "ERROR offscreen rendering failed" in out and "libegl-mesa0" in out
 
 
-def test_render_command(tmp_path):
+def test_render_command(tmp_path, cli):
     clip = tmp_path / "clip.mp4"
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "iout_mj.cli",
-            "render",
-            "--policy",
-            "greedy",
-            "--slots",
-            "2",
-            "--width",
-            "320",
-            "--height",
-            "180",
-            "--fps",
-            "10",
-            "--out",
-            str(clip),
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
+    out = cli(
+        *("render", "--policy", "greedy", "--slots", "2", "--width", "320", "--height", "180"),
+        *("--fps", "10", "--out", clip),
     )
-    assert "16 frames" in out.stdout
+    assert "17 frames" in out.stdout
     assert clip.stat().st_size > 1000 and clip.with_suffix(".png").exists()
-    bad = subprocess.run(
-        [sys.executable, "-m", "iout_mj.cli", "render", "--out", str(tmp_path / "clip.gif")],
-        capture_output=True,
-        text=True,
-    )
+    bad = cli("render", "--out", tmp_path / "clip.gif", check=False)
     assert bad.returncode == 2 and "accepted a path ending in .mp4" in bad.stderr

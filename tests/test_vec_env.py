@@ -8,10 +8,10 @@ import pytest
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-from iout_mj.envs import ENV_ID
 from iout_mj.backends.kinematic import move
+from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
 from iout_mj.mission import ActionError, Mission
-from iout_mj.envs import KinematicVecEnv, PhysicsVecEnv
+from iout_mj.mission.stats import unserved_aoi_sum
 
 
 def docked_start(cfg):
@@ -130,9 +130,12 @@ def test_bad_batched_actions_name_env_auv_and_range(cfg):
 def test_ppo_trains_on_the_vec_env(cfg):
     venv = VecNormalize(VecMonitor(KinematicVecEnv(4, config=cfg, seed=0)))
     model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, device="cpu", seed=0)
+    before = [p.detach().clone() for p in model.policy.parameters()]
     model.learn(4 * 32 * 2)
-    assert model.num_timesteps == 256
-    assert len(model.ep_info_buffer) > 0  # 55-slot episodes finished and were monitored
+    episodes = list(model.ep_info_buffer)  # the monitor saw whole episodes end
+    assert episodes and all(1 <= e["l"] <= 55 and np.isfinite(e["r"]) for e in episodes)
+    assert any(not (a == b).all() for a, b in zip(before, model.policy.parameters()))
+    assert np.isfinite(venv.obs_rms.mean).all() and venv.obs_rms.count > 4 * 32 * 2
 
 
 def test_aoi_booked_after_an_early_end_matches_slot_by_slot_ageing(cfg):
@@ -149,7 +152,7 @@ def test_aoi_booked_after_an_early_end_matches_slot_by_slot_ageing(cfg):
             ages = np.minimum(ages + 1, a_max)
             total += ages.mean()
         expected.append(total)
-    np.testing.assert_allclose(m._unserved_aoi_sum(), expected)
+    np.testing.assert_allclose(unserved_aoi_sum(cfg, m.state.slot, m.network.aoi), expected)
 
 
 def test_physics_batch_places_each_envs_own_layout_and_current(cfg):

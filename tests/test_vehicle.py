@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from iout_mj.backends.mujoco import names, vehicle
-from iout_mj.world import propulsion
-from iout_mj.config import make_config
-from iout_mj.world.geometry import wrap_angle
 from iout_mj.backends.mujoco.physics import AUVPhysics
 from iout_mj.experiments.energy_validation import maneuvers, steady_state, timestep_change
+from iout_mj.scenarios import make_config
+from iout_mj.world import propulsion
+from iout_mj.world.geometry import wrap_angle
 
 CFG1 = make_config(1, 7)
 

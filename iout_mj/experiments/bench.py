@@ -312,6 +312,7 @@ def run_all(quick: bool = False) -> dict[str, Any]:
     result["kinematic_steps_per_s"] = {key: v[f"batch_{KINEMATIC_BATCH}"] for key, v in kin.items()}
     result["kinematic_single_env_steps_per_s"] = {key: v["single_env"] for key, v in kin.items()}
     result["kinematic_batch"] = KINEMATIC_BATCH
+    result["physics_batch"] = PHYSICS_BATCH
     n_envs, rollouts = (2, 1) if quick else (PHYSICS_BATCH, 2)
     fps = {b: ppo_fps(b, 2, 7, n_envs, rollouts) for b in ("mujoco", "kinematic", None)}
     result["ppo_fps"] = {

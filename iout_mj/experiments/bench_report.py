@@ -4,6 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
+
+def _physics_batch(r: dict[str, Any]) -> int:
+    """Environments per PhysicsVecEnv call in a run (8 in runs that predate the key)."""
+    return int(r.get("physics_batch", 8))
+
 def format_table(r: dict[str, Any]) -> str:
     lines = [
         f"machine: {r['machine']['cpus']} CPUs, Python {r['machine']['python']}; physics "
@@ -12,9 +17,9 @@ def format_table(r: dict[str, Any]) -> str:
     ]
     lines.append(
         "slot_vs_raw (MuJoCo env steps/s over plain mj_step(nstep) from the same states; "
-        f"target >= 0.9): one gymnasium env | PhysicsVecEnv of {PHYSICS_BATCH}, one thread"
+        f"target >= 0.9): one gymnasium env | PhysicsVecEnv of {_physics_batch(r)}, one thread"
     )
-    b = f"batch_{PHYSICS_BATCH}_"
+    b = f"batch_{_physics_batch(r)}_"
     for key, v in r["slot_vs_raw"].items():
         lines.append(
             f"  {key:<7} env {v['env_steps_per_s']:6.1f}/s raw {v['raw_slots_per_s']:6.1f}/s "
@@ -45,7 +50,7 @@ def format_table(r: dict[str, Any]) -> str:
 
 def format_markdown(r: dict[str, Any]) -> str:
     """The README's table of one run."""
-    b = f"batch_{PHYSICS_BATCH}_"
+    b = f"batch_{_physics_batch(r)}_"
     rows = ["| benchmark | value | target |", "| --- | --- | --- |"]
     for key, v in r["slot_vs_raw"].items():
         rows.append(
@@ -53,7 +58,7 @@ def format_markdown(r: dict[str, Any]) -> str:
             f"{v['raw_slots_per_s']:.0f} slots/s) | {v['ratio']:.3f} | >= 0.9 |"
         )
         rows.append(
-            f"| slot_vs_raw {key}, PhysicsVecEnv of {PHYSICS_BATCH} on one thread (env "
+            f"| slot_vs_raw {key}, PhysicsVecEnv of {_physics_batch(r)} on one thread (env "
             f"{v[b + 'env_steps_per_s']:.0f} / raw {v[b + 'raw_slots_per_s']:.0f}) "
             f"| {v[b + 'ratio']:.3f} | >= 0.9 |"
         )

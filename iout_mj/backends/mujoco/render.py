@@ -70,11 +70,13 @@ class MissionRenderer:
         self._physics = physics
         self.data = physics.data.ptr if physics is not None else mujoco.MjData(model)
         self._view_data = mujoco.MjData(self.model)
-        self.top_size = min(width, height)
         self.width, self.height = width, height
-        self.top = make_renderer(self.model, height, self.top_size)
+        self.top_size = min(width, height)
         chase_w = width - self.top_size
-        self.chase = make_renderer(self.model, height, chase_w) if chase_w >= 64 else None
+        if chase_w < 64:  # too narrow for a chase view: the top view takes the whole frame
+            self.top_size, chase_w = width, 0
+        self.top = make_renderer(self.model, height, self.top_size)
+        self.chase = make_renderer(self.model, height, chase_w) if chase_w else None
         self._qx, self._qy, self._qyaw = joint_addresses(self.model, self.mission.n_auvs)
         self._nodes = [model.body(names.node_name(k)).id for k in range(mission.n_nodes)]
         self._chase_cam = names.auv_prefix(0) + names.CHASE_CAMERA
