@@ -3,6 +3,8 @@
 import os
 from ctypes.util import find_library
 
+import gymnasium  # does not import mujoco: the GL backend is still free to choose
+
 __version__ = "0.1.0"
 
 _GL_LIBRARIES = {"egl": "EGL", "osmesa": "OSMesa"}
@@ -38,8 +40,6 @@ def _choose_gl_backend() -> None:
 
 
 def _register() -> None:
-    import gymnasium
-
     if "iout_mj/MultiAUV-v0" not in gymnasium.registry:
         gymnasium.register(id="iout_mj/MultiAUV-v0", entry_point="iout_mj.envs.gym_env:MultiAUVEnv")
 

@@ -194,7 +194,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(bench_report.format_markdown(result) if args.markdown else bench_report.format_table(result))
+        print(
+            bench_report.format_markdown(result)
+            if args.markdown
+            else bench_report.format_table(result)
+        )
     return 0
 
 

@@ -1,4 +1,8 @@
-"""Typed, frozen configuration of a mission, with the paper's defaults and their sources."""
+"""Typed, frozen configuration of a mission, with the paper's defaults and their sources.
+
+One frozen dataclass per section, each with its checks beside its fields, so that the
+parameter table and its validation read together (hence the module's length).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ from typing import Any
 
 import yaml
 
+from iout_mj.paper import DEFAULT_STARTS, PAPER_LAYOUTS, Point
 from iout_mj.schema import (
     ConfigError,
     build_dataclass,
@@ -21,29 +26,6 @@ from iout_mj.schema import (
     to_plain,
 )
 
-Point = tuple[float, float]
-
-# Node layouts of the authors' public code (DESIGN.md section 4), metres.
-PAPER_LAYOUTS: dict[int, tuple[Point, ...]] = {
-    7: ((100, 100), (800, 500), (500, 900), (300, 700), (500, 200), (900, 200), (200, 400)),
-    13: (
-        (100, 100),
-        (800, 500),
-        (500, 900),
-        (300, 700),
-        (200, 400),
-        (900, 200),
-        (500, 200),
-        (700, 800),
-        (800, 200),
-        (700, 300),
-        (700, 100),
-        (300, 100),
-        (900, 700),
-    ),
-}
-# Start positions: the first two from the authors' code, the others continue the pattern.
-DEFAULT_STARTS: tuple[Point, ...] = ((50, 50), (50, 150), (150, 50), (150, 150))
 MAX_AUVS = 4
 MIN_NODES, MAX_NODES = 2, 30
 
@@ -242,9 +224,7 @@ class RewardConfig:
         for f in dataclasses.fields(self):
             if f.name != "weights":
                 value = getattr(self, f.name)
-                require(
-                    math.isfinite(value) and value >= 0, f.name, value, "a finite number >= 0"
-                )
+                require(math.isfinite(value) and value >= 0, f.name, value, "a finite number >= 0")
         positive(self, "collision_sigma_m", "margin_epsilon_j")
 
 
@@ -301,9 +281,7 @@ class ScenarioConfig:
             f"{MIN_NODES} to {MAX_NODES} nodes",
         )
         for i, (x, y) in enumerate(self.nodes_m):
-            require(
-                0 <= x <= ax and 0 <= y <= ay, f"nodes_m[{i}]", (x, y), "a point inside area_m"
-            )
+            require(0 <= x <= ax and 0 <= y <= ay, f"nodes_m[{i}]", (x, y), "a point inside area_m")
         require(
             len(self.starts_m) >= self.n_auvs,
             "starts_m",

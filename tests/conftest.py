@@ -25,7 +25,9 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(0)
 
 
-def run_cli(*args: str, check: bool = True, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def run_cli(
+    *args: object, check: bool = True, cwd: Path | None = None
+) -> subprocess.CompletedProcess:
     """`iout-mj ARGS` in a fresh interpreter, as a user runs it."""
     return subprocess.run(
         [sys.executable, "-m", "iout_mj.cli", *map(str, args)],

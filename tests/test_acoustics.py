@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig
+from iout_mj.world import acoustics
 
 CFG = AcousticsConfig()
 

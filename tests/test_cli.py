@@ -102,3 +102,15 @@ def test_bench_formats_the_saved_run_as_the_readme_table():
     assert out in (ROOT / "README.md").read_text()  # the README shows this very run
     bad = run("bench", "--from-json", "missing.json", check=False)
     assert bad.returncode == 2 and "missing.json" in bad.stderr
+
+
+def test_readme_shows_the_declared_observation():
+    from iout_mj.mission import OBSERVATION_DOC
+
+    assert OBSERVATION_DOC in (ROOT / "README.md").read_text()
+
+
+def test_mission_accepts_any_k_with_the_fixed_layout(tmp_path):
+    out = run("mission", "--nodes", "5", "--slots", "2", "--no-video", "--out", tmp_path)
+    summary = json.loads(out.stdout)
+    assert summary["n_nodes"] == 5 and len(summary["metrics"]["deliveries_per_node"]) == 5

@@ -98,7 +98,7 @@ def test_reward_weights_carry_their_signs():
     assert cfg.reward.weights.aoi == -0.5 and cfg.reward.stall_distance_m == 2.0
     with pytest.raises(ConfigError, match="unknown key"):
         Config.from_dict({"reward": {"aoi": 0.1}})  # weights live under reward.weights
-    with pytest.raises(ConfigError, match="weights.aoi"):
+    with pytest.raises(ConfigError, match=r"weights\.aoi"):
         Config.from_dict({"reward": {"weights": {"aoi": "high"}}})
 
 

@@ -134,7 +134,7 @@ def test_ppo_trains_on_the_vec_env(cfg):
     model.learn(4 * 32 * 2)
     episodes = list(model.ep_info_buffer)  # the monitor saw whole episodes end
     assert episodes and all(1 <= e["l"] <= 55 and np.isfinite(e["r"]) for e in episodes)
-    assert any(not (a == b).all() for a, b in zip(before, model.policy.parameters()))
+    assert any(not (a == b).all() for a, b in zip(before, model.policy.parameters(), strict=True))
     assert np.isfinite(venv.obs_rms.mean).all() and venv.obs_rms.count > 4 * 32 * 2
 
 

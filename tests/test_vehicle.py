@@ -87,7 +87,9 @@ def test_energy_is_zero_at_rest_and_grows_as_speed_cubed():
         p.step(500)
         powers.append(p.mech_energy_j[0, 0] / 25.0)
     assert powers[1] / powers[0] == pytest.approx(8.0, rel=0.01)
-    assert powers[0] == pytest.approx(float(propulsion.drag_power_w(1.0, CFG1.motion)) * 0.7, rel=0.01)
+    assert powers[0] == pytest.approx(
+        float(propulsion.drag_power_w(1.0, CFG1.motion)) * 0.7, rel=0.01
+    )
 
 
 def test_speed_step_tracked_and_never_above_v_max():

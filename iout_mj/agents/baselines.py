@@ -10,13 +10,12 @@ from __future__ import annotations
 from typing import Protocol
 
 import numpy as np
-from numpy.typing import NDArray
 
+from iout_mj.mission import Mission
+from iout_mj.types import BoolArray, FloatArray, IntArray
 from iout_mj.world import acoustics
 from iout_mj.world.geometry import pairwise_distance_m
-from iout_mj.mission import Mission
 
-IntArray = NDArray[np.int64]
 NODE_REACHED_M = 60.0
 """A node is 'being visited' within this distance."""
 CRUISE_MPS = 3.0
@@ -31,12 +30,12 @@ class Policy(Protocol):
     def __call__(self, mission: Mission) -> IntArray: ...
 
 
-def _wrap(angle: NDArray[np.float64]) -> NDArray[np.float64]:
+def _wrap(angle: FloatArray) -> FloatArray:
     return np.mod(angle + np.pi, 2 * np.pi) - np.pi
 
 
 def steer(
-    mission: Mission, targets_m: NDArray[np.float64], speeds_mps: NDArray[np.float64]
+    mission: Mission, targets_m: FloatArray, speeds_mps: FloatArray
 ) -> tuple[IntArray, IntArray]:
     """Heading and speed indices that turn each AUV toward its target and toward a speed."""
     delta = targets_m - mission.state.positions_m
@@ -48,7 +47,7 @@ def steer(
     return h, s
 
 
-def approach_speed(distance_m: NDArray[np.float64], slot_s: float) -> NDArray[np.float64]:
+def approach_speed(distance_m: FloatArray, slot_s: float) -> FloatArray:
     """Cruise far away, slow down near the target so the turning circle fits (>= 0.8 m/s)."""
     return np.clip(distance_m / (4.0 * slot_s), 0.8, CRUISE_MPS)
 
@@ -57,7 +56,7 @@ def _slots_left(mission: Mission) -> float:
     return float(mission.cfg.scenario.horizon_slots - mission.state.slot)
 
 
-def _must_dock(mission: Mission, extra_m: NDArray[np.float64] | float = 0.0) -> NDArray[np.bool_]:
+def _must_dock(mission: Mission, extra_m: FloatArray | float = 0.0) -> BoolArray:
     """AUVs that must head for the dock now to arrive before the horizon: travel at cruise
     speed, plus the slots to turn toward the dock and to ramp up to cruise speed."""
     m = mission.cfg.motion
@@ -66,7 +65,9 @@ def _must_dock(mission: Mission, extra_m: NDArray[np.float64] | float = 0.0) -> 
     turn = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - mission.state.heading_sp))
     turn_slots = turn / np.radians(m.dtheta_max_deg)
     ramp_slots = np.maximum(CRUISE_MPS - mission.state.speed_sp, 0) / m.dv_max_mps
-    travel = (mission.state.dock_dist_m + extra_m - mission.cfg.scenario.dock_radius_m * 0.5) / slot_m
+    travel = (
+        mission.state.dock_dist_m + extra_m - mission.cfg.scenario.dock_radius_m * 0.5
+    ) / slot_m
     return travel + turn_slots + ramp_slots + DOCK_MARGIN_SLOTS >= _slots_left(mission)
 
 
@@ -103,14 +104,16 @@ class RoundRobin:
     name = "round-robin"
 
     def reset(self, seed: int | None = None) -> None:
-        self._next: NDArray[np.int64] | None = None
+        self._next: IntArray | None = None
 
     def __call__(self, mission: Mission) -> IntArray:
         n, k = mission.n_auvs, mission.n_nodes
         if self._next is None or mission.state.slot == 0:
             self._next = np.arange(n) % k
         nodes = mission.network.nodes_m
-        reached = np.linalg.norm(nodes[self._next] - mission.state.positions_m, axis=1) < NODE_REACHED_M
+        reached = (
+            np.linalg.norm(nodes[self._next] - mission.state.positions_m, axis=1) < NODE_REACHED_M
+        )
         self._next = np.where(reached, (self._next + n) % k, self._next)
         targets = nodes[self._next]
         dock = _must_dock(mission)
@@ -147,7 +150,7 @@ class Planner:
     name = "planner"
 
     def reset(self, seed: int | None = None) -> None:
-        self._target: NDArray[np.int64] | None = None
+        self._target: IntArray | None = None
 
     def __call__(self, mission: Mission) -> IntArray:
         n, _k = mission.n_auvs, mission.n_nodes

@@ -15,10 +15,10 @@ import dm_env
 import numpy as np
 from dm_env import specs
 
-from iout_mj.world import propulsion
 from iout_mj.config import Config
-from iout_mj.world.geometry import norm_xy, wrap_angle
 from iout_mj.mission import Mission
+from iout_mj.world import propulsion
+from iout_mj.world.geometry import norm_xy, wrap_angle
 
 PATH_FRACTIONS = np.linspace(0.0, 1.0, 6)[1:]
 """Points along each straight slot move (fractions of it) at which separations are checked."""

@@ -21,7 +21,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from numpy.typing import NDArray
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
@@ -35,6 +34,7 @@ from iout_mj.backends.mujoco.task import book, command, start_episode, substeps_
 from iout_mj.envs.gym_env import spaces
 from iout_mj.mission import Mission
 from iout_mj.scenarios import ConfigLike, resolve_config
+from iout_mj.types import BoolArray, FloatArray
 
 
 class MissionVecEnv(VecEnv):
@@ -66,11 +66,11 @@ class MissionVecEnv(VecEnv):
         self._none_failed = np.zeros(self.num_envs, dtype=bool)
 
     # ------------------------------------------------------------------ subclass hooks
-    def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    def _move(self, actions: Any) -> tuple[FloatArray, BoolArray]:
         """One slot for every environment: rewards, and which envs failed (diverged)."""
         raise NotImplementedError
 
-    def _restart(self, mask: NDArray[np.bool_] | None) -> None:
+    def _restart(self, mask: BoolArray | None) -> None:
         """Start new episodes where `mask` (everywhere for None)."""
         self.mission.reset(self.random, mask)
 
@@ -142,7 +142,7 @@ class MissionVecEnv(VecEnv):
 class KinematicVecEnv(MissionVecEnv):
     """B kinematic environments stepped together; spaces as `iout_mj/MultiAUV-v0`."""
 
-    def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    def _move(self, actions: Any) -> tuple[FloatArray, BoolArray]:
         return move(self.mission, actions), self._none_failed
 
 
@@ -171,13 +171,13 @@ class PhysicsVecEnv(MissionVecEnv):
         self.substeps = substeps_per_slot(self.cfg, self.physics[0].dt_s)
         self.stepper = Stepper(nthread)
 
-    def _restart(self, mask: NDArray[np.bool_] | None) -> None:
+    def _restart(self, mask: BoolArray | None) -> None:
         super()._restart(mask)
         rows = range(self.num_envs) if mask is None else np.flatnonzero(mask)
         for e in rows:
             start_episode(self.mission, self.physics[e], int(e))
 
-    def _move(self, actions: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    def _move(self, actions: Any) -> tuple[FloatArray, BoolArray]:
         meters = command(self.mission, self.physics, actions)
         failed = self.stepper.step(self.physics, self.substeps)
         return book(self.mission, self.physics, meters), failed

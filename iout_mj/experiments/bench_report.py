@@ -9,6 +9,7 @@ def _physics_batch(r: dict[str, Any]) -> int:
     """Environments per PhysicsVecEnv call in a run (8 in runs that predate the key)."""
     return int(r.get("physics_batch", 8))
 
+
 def format_table(r: dict[str, Any]) -> str:
     lines = [
         f"machine: {r['machine']['cpus']} CPUs, Python {r['machine']['python']}; physics "

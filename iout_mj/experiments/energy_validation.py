@@ -192,3 +192,33 @@ def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str,
     if figure is not None:
         energy_validation_figure(result, traces, figure)
     return result
+
+
+def format_table(result: dict[str, Any]) -> str:
+    lines = [
+        "Steady state (electrical power, W)",
+        f"{'speed m/s':>10} {'measured':>10} {'model':>10} {'rel.err':>9}",
+    ]
+    for r in result["steady"]:
+        lines.append(
+            f"{r['speed_mps']:>10.1f} {r['measured_power_w']:>10.2f} "
+            f"{r['model_power_w']:>10.2f} {r['rel_error']:>+9.2%}"
+        )
+    lines += [
+        "",
+        "Manoeuvres (energy over the manoeuvre, kJ)",
+        f"{'manoeuvre':<28} {'slots':>5} {'measured':>9} {'model':>9} {'gap':>8}",
+    ]
+    for r in result["maneuvers"]:
+        lines.append(
+            f"{r['name']:<28} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
+            f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%}"
+        )
+    ts = result["timestep"]
+    cands = ", ".join(f"dt={k} s: {v:.2%}" for k, v in ts["candidates"].items())
+    lines += [
+        "",
+        f"Timestep: largest dt with < 1% change when quartered: {ts['dt_s']} s "
+        f"({ts['rel_change_quarter_dt']:.3%}); {cands}",
+    ]
+    return "\n".join(lines)

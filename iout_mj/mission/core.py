@@ -37,6 +37,12 @@ from iout_mj.world.network import SensorNetwork, SlotOutcome, rows
 class Mission:
     """State and rules of one multi-AUV data-collection episode, or of B of them at once."""
 
+    cfg: Config
+    state: MissionState
+    network: SensorNetwork
+    inv_area: FloatArray
+    inv_diag: float
+
     def __init__(
         self, cfg: Config, random_layout_per_episode: bool = False, n_envs: int | None = None
     ):

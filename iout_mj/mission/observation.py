@@ -143,8 +143,7 @@ def flatten_observation(obs: dict[str, Any]) -> np.ndarray:
 OBSERVATION_DOC = (
     "Observation (flattened in this order; N AUVs, K nodes):\n"
     + "".join(
-        f"  {g.name:<15}{g.size_text:>3}  {g.doc:<38} {g.bounds}\n"
-        for g in OBSERVATION_LAYOUT
+        f"  {g.name:<15}{g.size_text:>3}  {g.doc:<38} {g.bounds}\n" for g in OBSERVATION_LAYOUT
     )
     + (__doc__ or "").split("\n\n")[1].split(" `OBSERVATION_DOC`")[0]
     + "\n"

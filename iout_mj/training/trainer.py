@@ -158,6 +158,9 @@ def train(
     model: Any = None
     backend = cfg.phases[state.phase].backend if state.phase < len(cfg.phases) else ""
 
+    def progress_to(num_timesteps: int) -> None:
+        bar.update(num_timesteps - bar.n)
+
     def checkpoint(model: Any) -> None:
         stats = model.get_vec_normalize_env()
         metrics = evaluate_model(model, stats, cfg, backend, cfg.eval_episodes)
@@ -190,7 +193,7 @@ def train(
                     phase_end,
                     model.num_timesteps,
                     checkpoint,
-                    lambda n: bar.update(n - bar.n),
+                    progress_to,
                 ),
             ]
             # SB3 counts the schedule over num_timesteps / (num_timesteps + remaining); the

@@ -17,16 +17,15 @@ All functions take scalars or arrays of distances (any shape, e.g. AUVs x nodes)
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from iout_mj.config import AcousticsConfig
+from iout_mj.types import FloatArray
 
 SL_REF_DB = 170.8
 """Source level of 1 W of acoustic power radiated omnidirectionally, dB re 1 uPa at 1 m."""
 MIN_DISTANCE_M = 1.0
 """Transmission loss is referred to 1 m; closer distances count as 1 m."""
-
-FloatArray = NDArray[np.float64]
 
 
 def thorp_absorption_db_per_km(f_khz: ArrayLike) -> FloatArray:

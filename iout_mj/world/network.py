@@ -22,13 +22,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-from iout_mj.world import acoustics
 from iout_mj.config import AcousticsConfig, NetworkConfig
+from iout_mj.types import BoolArray, FloatArray
+from iout_mj.world import acoustics
 from iout_mj.world.geometry import pairwise_distance_m
 
-FloatArray = NDArray[np.float64]
 INITIAL_AOI = 1.0
 
 
@@ -39,7 +39,7 @@ def jain_index(counts: ArrayLike) -> Any:
     return (np.square(o.sum(axis=-1)) / (o.shape[-1] * sq + (sq == 0)))[()]  # 0 / 1 if none
 
 
-def rows(mask: NDArray[np.bool_] | None) -> Any:
+def rows(mask: BoolArray | None) -> Any:
     """Index of the batch rows to (re)set: every row for None, else the rows where `mask`."""
     return Ellipsis if mask is None else mask
 
@@ -50,7 +50,7 @@ class SlotOutcome:
 
     distance_m: FloatArray
     """(N, K) AUV-node distances used for the link budget."""
-    uplink_ok: NDArray[np.bool_]
+    uplink_ok: BoolArray
     """(N,) the node named by AUV i delivered an update."""
     uplink_req_j: FloatArray
     """(N,) E_req from AUV i's named node to AUV i."""
@@ -58,7 +58,7 @@ class SlotOutcome:
     """(N,) energy stored at AUV i's named node at the start of the slot."""
     harvested_j: FloatArray
     """(K,) energy each node harvested in this slot."""
-    delivered: NDArray[np.bool_]
+    delivered: BoolArray
     """(K,) node k delivered an update."""
 
 
@@ -92,7 +92,7 @@ class SensorNetwork:
     def n_nodes(self) -> int:
         return len(self._node_index)
 
-    def reset(self, mask: NDArray[np.bool_] | None = None) -> None:
+    def reset(self, mask: BoolArray | None = None) -> None:
         """Fresh nodes in every environment (mask None) or in those where `mask` is True."""
         i = rows(mask)
         self.energy_j[i] = self.cfg.node_initial_energy_j

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from iout_mj.config import MotionConfig
-
-FloatArray = NDArray[np.float64]
+from iout_mj.types import FloatArray
 
 
 def drag_power_w(speed_mps: ArrayLike, motion: MotionConfig) -> FloatArray:

@@ -17,13 +17,12 @@ import numpy as np
 from dm_control.mujoco import engine, wrapper
 from dm_control.rl.control import PhysicsError
 from mujoco import rollout
-from numpy.typing import NDArray
 
 from iout_mj.backends.mujoco import names, vehicle
 from iout_mj.config import Config
+from iout_mj.types import BoolArray, FloatArray, IntArray
 from iout_mj.world.geometry import norm_xy, wrap_angle
 
-FloatArray = NDArray[np.float64]
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
 
@@ -31,9 +30,7 @@ def _sensor_adr(model: mujoco.MjModel, name: str) -> int:
     return int(model.sensor_adr[model.sensor(name).id])
 
 
-def joint_addresses(
-    model: mujoco.MjModel, n_auvs: int, field: str = "jnt_qposadr"
-) -> NDArray[np.int64]:
+def joint_addresses(model: mujoco.MjModel, n_auvs: int, field: str = "jnt_qposadr") -> IntArray:
     """(3, N) qpos (or, with field='jnt_dofadr', dof) addresses of every AUV's x, y, yaw."""
     return np.array(
         [
@@ -203,7 +200,7 @@ class Stepper:
         """Set to a list to keep every scene's (start state, first control) of every step (the
         benchmark replays them through plain `mj_step`)."""
 
-    def step(self, physics: Sequence[AUVPhysics], nstep: int) -> NDArray[np.bool_]:
+    def step(self, physics: Sequence[AUVPhysics], nstep: int) -> BoolArray:
         """Advance every physics `nstep` substeps; returns which of them diverged (MuJoCo
         reset its state, or it is not finite) in the meantime."""
         models = [p.model.ptr for p in physics]

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import itertools
 import os
-from typing import Any
 
 import mujoco
 import numpy as np
@@ -22,6 +21,7 @@ from iout_mj.backends.mujoco import names, vehicle
 from iout_mj.backends.mujoco.physics import AUVPhysics, joint_addresses
 from iout_mj.mission import Mission
 from iout_mj.mission.observation import node_energy_level
+from iout_mj.types import FloatArray
 from iout_mj.world.geometry import wrap_angle
 
 TRAIL_POINTS = 400
@@ -86,16 +86,16 @@ class MissionRenderer:
     def reset(self) -> None:
         """Start a new episode: clear trails and frames, place this episode's node markers."""
         self.model.body_pos[self._nodes, :2] = self.mission.network.nodes_m
-        self.trails: list[list[NDArray[np.float64]]] = [[] for _ in range(self.mission.n_auvs)]
+        self.trails: list[list[FloatArray]] = [[] for _ in range(self.mission.n_auvs)]
         self._slot_start_pose = self._pose_now()
         self._pending: list[NDArray[np.uint8]] = []
 
     # ------------------------------------------------------------------ poses
-    def _pose_now(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _pose_now(self) -> tuple[FloatArray, FloatArray]:
         m = self.mission
         return m.state.positions_m.copy(), m.state.headings_rad.copy()
 
-    def _substep_poses(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    def _substep_poses(self) -> list[tuple[FloatArray, FloatArray]]:
         """Poses for the frames of the slot that just ended."""
         k = self.frames_per_slot
         if self._physics is not None:
@@ -109,7 +109,7 @@ class MissionRenderer:
         dh = wrap_angle(h1 - h0)
         return [(p0 + (p1 - p0) * f, h0 + dh * f) for f in np.arange(1, k + 1) / k]
 
-    def _place(self, xy: NDArray[np.float64], yaw: NDArray[np.float64]) -> mujoco.MjData:
+    def _place(self, xy: FloatArray, yaw: FloatArray) -> mujoco.MjData:
         d = self._view_data
         d.qpos[:] = self.data.qpos
         d.qpos[self._qx], d.qpos[self._qy], d.qpos[self._qyaw] = xy[:, 0], xy[:, 1], yaw
@@ -140,7 +140,7 @@ class MissionRenderer:
         xy, yaw = self._pose_now()
         return self._compose(xy, yaw)
 
-    def _compose(self, xy: NDArray[np.float64], yaw: NDArray[np.float64]) -> NDArray[np.uint8]:
+    def _compose(self, xy: FloatArray, yaw: FloatArray) -> NDArray[np.uint8]:
         d = self._place(xy, yaw)
         self.top.update_scene(d, camera=names.TOP_CAMERA)
         self._decorate(self.top.scene, xy, yaw, top=True)
@@ -163,9 +163,9 @@ class MissionRenderer:
     def _line(
         self,
         scene: mujoco.MjvScene,
-        a: NDArray[np.float64],
-        b: NDArray[np.float64],
-        rgba: NDArray[np.float64],
+        a: FloatArray,
+        b: FloatArray,
+        rgba: FloatArray,
         width: float,
     ) -> None:
         g = self._add(scene)
@@ -181,9 +181,7 @@ class MissionRenderer:
         )
         mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_LINE, width, a, b)
 
-    def _decorate(
-        self, scene: mujoco.MjvScene, xy: NDArray[np.float64], yaw: NDArray[np.float64], top: bool
-    ) -> None:
+    def _decorate(self, scene: mujoco.MjvScene, xy: FloatArray, yaw: FloatArray, top: bool) -> None:
         mission, net = self.mission, self.mission.network
         z_auv = vehicle.AUV_DEPTH_M
         z_bed = vehicle.SEABED_DEPTH_M + 4.5
@@ -248,8 +246,9 @@ class MissionRenderer:
         m = self.mission
         slot_s = self.cfg.scenario.slot_s
         energy_kj = ", ".join(f"{e / 1e3:.0f}" for e in m.state.propulsion_energy_j)
+        slot, horizon = m.state.slot, self.cfg.scenario.horizon_slots
         lines = [
-            f"t = {m.state.slot * slot_s:5.0f} s  (slot {m.state.slot}/{self.cfg.scenario.horizon_slots})",
+            f"t = {slot * slot_s:5.0f} s  (slot {slot}/{horizon})",
             f"mean AoI {m.network.mean_aoi:5.1f}   Jain {m.network.jain:4.2f}",
             f"data {m.network.delivered_bits / 1e6:6.1f} Mbit",
             f"energy/AUV {energy_kj} kJ",

@@ -14,16 +14,20 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
+from iout_mj.backends.mujoco.physics import AUVPhysics
 from iout_mj.config import Config
 from iout_mj.mission import Mission
 from iout_mj.world import propulsion
-from iout_mj.backends.mujoco.physics import AUVPhysics
 
 
 def start_episode(mission: Mission, physics: AUVPhysics, env: Any = ()) -> None:
     """Put environment `env` of a just reset `mission` (nodes, current, vehicles) into physics."""
     physics.place_scene(mission.network.nodes_m[env], mission.state.current_mps[env])
-    physics.set_poses(mission.state.positions_m[env], mission.state.headings_rad[env], mission.state.speeds_mps[env])
+    physics.set_poses(
+        mission.state.positions_m[env],
+        mission.state.headings_rad[env],
+        mission.state.speeds_mps[env],
+    )
 
 
 def command(mission: Mission, physics: Sequence[AUVPhysics], action: Any) -> np.ndarray:
