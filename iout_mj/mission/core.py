@@ -35,7 +35,11 @@ from iout_mj.world.network import SensorNetwork, SlotOutcome, rows
 
 
 class Mission:
-    """State and rules of one multi-AUV data-collection episode, or of B of them at once."""
+    """State and rules of one multi-AUV data-collection episode, or of B of them at once.
+
+    Longer than most classes here because `end_slot` is one ordered sequence (energy, network,
+    docking, termination, reward, statistics) whose every rule lives in the module it calls.
+    """
 
     cfg: Config
     state: MissionState

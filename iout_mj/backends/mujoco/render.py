@@ -53,7 +53,8 @@ class MissionRenderer:
     The frame is the top-down view of the whole area beside a chase view of AUV 0
     (when `width` > `height`), with an overlay of time, mean AoI, Jain, data and energy.
     With `physics` (the MuJoCo backend) the frames of a slot come from its substeps; without
-    (the kinematic backend) the vehicles are placed along straight lines.
+    (the kinematic backend) the vehicles are placed along straight lines. One class (over the
+    house's ~150 lines): poses, trails, decorations and overlay share the two views' scenes.
     """
 
     def __init__(
