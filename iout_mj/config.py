@@ -19,6 +19,7 @@ from iout_mj.paper import DEFAULT_STARTS, PAPER_LAYOUTS, Point
 from iout_mj.schema import (
     ConfigError,
     build_dataclass,
+    check_finite,
     fraction,
     load_mapping,
     positive,
@@ -49,6 +50,7 @@ class MotionConfig:
     battery_j: float = 2.0e6
 
     def __post_init__(self) -> None:
+        check_finite(self)
         positive(
             self,
             "v_max_mps",
@@ -113,6 +115,7 @@ class AcousticsConfig:
     """Wenz model surface wind speed."""
 
     def __post_init__(self) -> None:
+        check_finite(self)
         positive(
             self,
             "f_wet_khz",
@@ -151,6 +154,7 @@ class NetworkConfig:
     node_initial_energy_j: float = 0.1
 
     def __post_init__(self) -> None:
+        check_finite(self)
         require(self.k_reset >= 1, "k_reset", self.k_reset, "an integer >= 1")
         require(self.aoi_max >= 1, "aoi_max", self.aoi_max, "a number >= 1")
         require(
@@ -196,6 +200,7 @@ class RewardWeights:
     as a reward term (the paper states it as a constraint; the value is ours)."""
 
     def __post_init__(self) -> None:
+        check_finite(self)
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             require(math.isfinite(value), f.name, value, "a finite number")
@@ -221,6 +226,7 @@ class RewardConfig:
     """lambda_f of the objective P1 (not a reward weight; used for the reported objective)."""
 
     def __post_init__(self) -> None:
+        check_finite(self)
         for f in dataclasses.fields(self):
             if f.name != "weights":
                 value = getattr(self, f.name)
@@ -240,6 +246,7 @@ class PhysicsConfig:
     """Per-episode random current of up to this speed, drawn from the task RNG."""
 
     def __post_init__(self) -> None:
+        check_finite(self)
         require(0 < self.timestep_s <= 0.5, "timestep_s", self.timestep_s, "a number in (0, 0.5]")
         require(
             self.current_jitter_mps >= 0,
@@ -268,6 +275,7 @@ class ScenarioConfig:
     start_heading_jitter_deg: float = 5.0
 
     def __post_init__(self) -> None:
+        check_finite(self)
         ax, ay = self.area_m
         require(ax > 0 and ay > 0, "area_m", self.area_m, "two sides > 0 m")
         require(

@@ -92,9 +92,12 @@ def test_bad_policy_names_and_files(tmp_path, cli):
     env = gym.make(ENV_ID, backend="kinematic")
     with pytest.raises(ValueError, match="unknown policy 'best'"):
         load_policy("best", env)
-    bad = tmp_path / "policy.zip"
-    bad.write_bytes(b"not a zip")
-    with pytest.raises(ValueError, match="cannot load policy"):
+    bad = tmp_path / "policy"
+    bad.mkdir()
+    (bad / "policy.json").write_text("not json")
+    with pytest.raises(ValueError, match=r"cannot load policy .*not valid JSON"):
         load_policy(str(bad), env)
+    with pytest.raises(ValueError, match="holds no policy"):
+        load_policy(str(tmp_path), env)
     out = cli("evaluate", "--policy", "nope", "--episodes", "1", check=False)
     assert out.returncode == 2 and "unknown policy 'nope'" in out.stderr

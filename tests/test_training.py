@@ -1,9 +1,16 @@
 """PPO end to end: a short run on both backends, save, reload, predict, resume, refusal."""
 
 import json
+import signal
+import subprocess
+import sys
+import time
 
 import gymnasium as gym
 import pytest
+import torch
+import yaml
+from safetensors.torch import load_file
 
 from iout_mj.agents.policies import SHIPPED_DIR, load_policy
 from iout_mj.agents.rollout import run_episode
@@ -40,9 +47,9 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
     assert [h["backend"] for h in state.history][-1] == "mujoco"
     for folder in ("last", "best"):
         assert {p.name for p in (tmp_path / folder).iterdir()} == {
-            "model.zip",
-            "vecnormalize.pkl",
-            "meta.json",
+            "policy.json",
+            "weights.safetensors",
+            "normalization.json",
         }
     env = gym.make(ENV_ID, backend="mujoco", n_auvs=1, n_nodes=7)
     policy = load_policy(str(tmp_path / "last"), env)
@@ -62,13 +69,61 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
             progress=False,
             parallel=False,
         )
-    with pytest.raises(FileExistsError, match="--resume"):
+    with pytest.raises(FileExistsError, match=r"--resume.*--overwrite"):
         train(cfg, tmp_path, progress=False, parallel=False)
-    state_file = json.loads((tmp_path / "state.json").read_text())
-    state_file["phase"], state_file["num_timesteps"] = 1, 128  # as if killed mid-run
-    (tmp_path / "state.json").write_text(json.dumps(state_file))
     resumed = train(cfg, tmp_path, resume=True, progress=False, parallel=False)
-    assert resumed.num_timesteps == 256
+    assert resumed.num_timesteps == 256 and len(resumed.history) == len(state.history)
+    again = train(cfg, tmp_path, progress=False, parallel=False, overwrite=True)
+    assert again.history == state.history  # a fresh run of the same config and seed
+
+
+def weights(folder):
+    return load_file(str(folder / "weights.safetensors"))
+
+
+def test_killed_and_resumed_run_ends_with_the_uninterrupted_weights(tmp_path, cli):
+    """SIGKILL in the second phase; --resume continues from the end of the first phase and
+    ends with the same step count and, bit for bit, the same weights."""
+    config = tmp_path / "k.yaml"
+    cfg = small(
+        n_envs=4,
+        phases=(PhaseConfig("kinematic", 512), PhaseConfig("kinematic", 4096)),
+        eval_every_steps=10**9,
+        eval_episodes=1,
+    )
+    config.write_text(yaml.safe_dump(cfg.to_dict()))
+    cli("train", "--config", config, "--out", tmp_path / "whole")
+    run = tmp_path / "killed"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "iout_mj.cli", "train", "--config", config, "--out", run],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        state = run / "state.json"
+        if state.is_file() and json.loads(state.read_text() or "{}").get("phase") == 1:
+            proc.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.02)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL, "the run ended before it could be killed"
+    assert (
+        not (run / "state.json").is_file()
+        or json.loads((run / "state.json").read_text())["phase"] == 1
+    )
+    cli("train", "--config", config, "--out", run, "--resume")
+    whole, resumed = weights(tmp_path / "whole" / "last"), weights(run / "last")
+    assert set(whole) == set(resumed)
+    for key in whole:
+        if key.startswith(("policy.", "optimizer.")):
+            assert torch.equal(whole[key], resumed[key]), key
+    final = json.loads((run / "state.json").read_text())
+    assert (
+        final["num_timesteps"]
+        == 512 + 4096
+        == json.loads((tmp_path / "whole" / "state.json").read_text())["num_timesteps"]
+    )
 
 
 def test_policy_for_other_scenario_is_refused(tmp_path):

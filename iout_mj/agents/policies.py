@@ -1,92 +1,138 @@
 """Policies by name: the baselines, the shipped PPO policies, or a saved policy folder.
 
 Every policy is a callable `policy(env, obs) -> action` (`rollout.EnvPolicy`). A trained
-policy is checked against the env it is asked to fly: one trained for another (N, K) is
-refused with a message naming both.
+policy is read in the safe format (`policy_format`) and checked against the env it is asked
+to fly: one trained for other spaces or another action mapping is refused with a message
+naming the difference. A legacy SB3 folder (model.zip, vecnormalize.pkl) unpickles code and
+loads only with `trust_pickle=True`.
 """
 
 from __future__ import annotations
 
-import json
 import pickle
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3 import PPO
 
 from iout_mj.agents.baselines import POLICIES, make_policy
+from iout_mj.agents.policy_format import (
+    MANIFEST,
+    LoadedPolicy,
+    Normalizer,
+    PolicyFormatError,
+    load_policy_folder,
+    normalization_dict,
+    save_policy,
+)
+from iout_mj.config import Config
+from iout_mj.envs.gym_env import ENV_ID
 
 SHIPPED_DIR = Path(__file__).resolve().parent / "shipped"
+LEGACY_FILES = ("model.zip", "vecnormalize.pkl")
+ACTION_MAPPING = ("heading_levels", "speed_levels", "dtheta_max_deg", "dv_max_mps", "v_max_mps")
+"""Motion settings that decide what an action index means: a policy needs the same."""
 
 
 class PolicyError(ValueError):
-    """A policy file is missing, unreadable, or made for another scenario."""
+    """A policy is unknown, unreadable, unsafe to load, or made for another scenario."""
 
 
 def shipped_policies() -> list[str]:
     """Names of the policies shipped with the package."""
-    return sorted(p.name for p in SHIPPED_DIR.glob("*") if (p / "model.zip").is_file())
+    return sorted(p.name for p in SHIPPED_DIR.glob("*") if (p / MANIFEST).is_file())
 
 
-def resolve_policy_path(name: str) -> Path:
-    """A shipped policy name (e.g. 'ppo-n2-k7') or a path to a saved policy (.zip)."""
-    shipped = SHIPPED_DIR / name / "model.zip"
-    if shipped.is_file():
-        return shipped
+def resolve_policy_folder(name: str) -> Path:
+    """The folder of a shipped policy name (e.g. 'ppo-n2-k7') or of a saved policy."""
+    if (SHIPPED_DIR / name / MANIFEST).is_file():
+        return SHIPPED_DIR / name
     path = Path(name)
-    if path.is_dir() and (path / "model.zip").is_file():
-        return path / "model.zip"
-    if path.is_file():
+    if path.is_dir():
         return path
+    if path.is_file() and path.name in (MANIFEST, *LEGACY_FILES):
+        return path.parent
     raise PolicyError(
         f"unknown policy {name!r}: accepted {', '.join(POLICIES)}, "
-        f"a shipped policy {shipped_policies()}, or a policy file (.zip)"
+        f"a shipped policy {shipped_policies()}, or a policy folder"
     )
 
 
-def load_trained(path: Path, env: Any) -> Any:
-    """A `policy(env, obs) -> action` from a saved run folder's model.zip, checked against env."""
-    folder = path.parent
-    meta_path = folder / "meta.json"
-    try:
-        model = PPO.load(path, device="cpu")
-    except Exception as exc:  # a zip from elsewhere, a truncated file, ...
-        raise PolicyError(f"cannot load policy {path}: {type(exc).__name__}: {exc}") from exc
+def check_fits(manifest: dict[str, Any], folder: Path, env: Any) -> None:
+    """Refuse an env whose spaces or action mapping the policy cannot serve."""
     mission = env.unwrapped.mission
-    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-    want = (meta.get("n_auvs"), meta.get("n_nodes"))
-    if model.action_space.shape != env.action_space.shape or (
-        want != (None, None) and want != (mission.n_auvs, mission.n_nodes)
-    ):
+    obs_size, nvec = env.observation_space.shape[0], [int(v) for v in env.action_space.nvec]
+    want_n, want_k = manifest.get("n_auvs"), manifest.get("n_nodes")
+    if (want_n, want_k) != (mission.n_auvs, mission.n_nodes) or (
+        manifest.get("observation_size"),
+        manifest.get("action_nvec"),
+    ) != (obs_size, nvec):
         raise PolicyError(
-            f"policy {path} was trained for N={want[0]}, K={want[1]} "
-            f"(action space {model.action_space}); this env has "
-            f"N={mission.n_auvs}, K={mission.n_nodes}"
+            f"policy {folder} was trained for N={want_n}, K={want_k} (observation "
+            f"{manifest.get('observation_size')}, actions {manifest.get('action_nvec')}); "
+            f"this env has N={mission.n_auvs}, K={mission.n_nodes} (observation {obs_size}, "
+            f"actions {nvec})"
         )
-    stats_path = folder / "vecnormalize.pkl"
-    stats = None
-    if stats_path.is_file():
-        with stats_path.open("rb") as f:
+    trained = manifest.get("env_config", {}).get("motion", {})
+    motion = env.unwrapped.cfg.motion
+    for key in ACTION_MAPPING:
+        if key in trained and trained[key] != getattr(motion, key):
+            raise PolicyError(
+                f"policy {folder} was trained with motion.{key}={trained[key]}; this env has "
+                f"{getattr(motion, key)}: its action indices would mean other manoeuvres"
+            )
+
+
+def _legacy(folder: Path, env: Any) -> LoadedPolicy:
+    """An SB3 zip and a pickled VecNormalize: both can run code when read."""
+    for name in LEGACY_FILES:
+        if not (folder / name).is_file():
+            raise PolicyError(
+                f"{folder / name} is missing (the normalisation statistics are part of the policy)"
+            )
+    try:
+        model: Any = PPO.load(folder / "model.zip", device="cpu")
+        with (folder / "vecnormalize.pkl").open("rb") as f:
             stats = pickle.load(f)
-    return model_policy(model, stats)
+    except Exception as exc:  # a zip from elsewhere, a truncated file, ...
+        raise PolicyError(f"cannot load policy {folder}: {type(exc).__name__}: {exc}") from exc
+    nvec = [int(v) for v in model.action_space.nvec]
+    manifest = {
+        "observation_size": int(model.observation_space.shape[0]),
+        "action_nvec": nvec,
+        "n_auvs": len(nvec) // 4,
+        "n_nodes": nvec[2],
+    }
+    return LoadedPolicy(model.policy, Normalizer.from_vec_normalize(stats), manifest, stats)
 
 
-def model_policy(model: Any, stats: Any = None) -> Any:
-    """A deterministic `policy(env, obs) -> action` from an SB3 model and its VecNormalize
-    statistics (None: observations are used as they are)."""
+def read_trained(name: str, env: Any, trust_pickle: bool = False) -> LoadedPolicy:
+    """A trained policy by name or folder, checked against `env`."""
+    folder = resolve_policy_folder(name)
+    if (folder / MANIFEST).is_file():
+        try:
+            loaded = load_policy_folder(folder)
+        except PolicyFormatError as exc:
+            raise PolicyError(f"cannot load policy {folder}: {exc}") from exc
+    elif any((folder / f).is_file() for f in LEGACY_FILES):
+        if not trust_pickle:
+            raise PolicyError(
+                f"{folder} is a legacy SB3 policy (model.zip / vecnormalize.pkl): loading it "
+                "unpickles, which can run any code the file carries. Load it only if you trust "
+                "its source, with --trust-pickle (trust_pickle=True)"
+            )
+        loaded = _legacy(folder, env)
+    else:
+        raise PolicyError(f"{folder} holds no policy: accepted a folder with {MANIFEST}")
+    check_fits(loaded.manifest, folder, env)
+    return loaded
 
-    def act(_env: Any, obs: np.ndarray) -> np.ndarray:
-        x = stats.normalize_obs(obs) if stats is not None else obs
-        action, _ = model.predict(x, deterministic=True)
-        return action
 
-    return act
-
-
-def load_policy(name: str, env: Any, seed: int = 0) -> Any:
+def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) -> Any:
     """A callable `policy(env, obs) -> action`: a baseline name or a trained policy (name or
-    file), checked against `env`."""
+    folder), checked against `env`."""
     if name in POLICIES:
         baseline = make_policy(name, seed)
 
@@ -95,4 +141,25 @@ def load_policy(name: str, env: Any, seed: int = 0) -> Any:
 
         act.reset = baseline.reset  # type: ignore[attr-defined]
         return act
-    return load_trained(resolve_policy_path(name), env)
+    loaded = read_trained(name, env, trust_pickle)
+
+    def act_trained(_env: Any, obs: np.ndarray) -> np.ndarray:
+        return loaded.act(obs)
+
+    return act_trained
+
+
+def convert_legacy(src: Path, dst: Path, env_config: Config, extra: dict[str, Any]) -> None:
+    """Rewrite a trusted legacy SB3 policy folder in the safe format (same weights and
+    statistics: the same actions)."""
+    env: Any = gym.make(ENV_ID, backend="kinematic", config=env_config)
+    loaded = _legacy(src, env)
+    mission = env.unwrapped.mission
+    manifest = {
+        "n_auvs": mission.n_auvs,
+        "n_nodes": mission.n_nodes,
+        "env_config": env_config.to_dict(),
+        **extra,
+    }
+    save_policy(dst, loaded.policy, normalization_dict(loaded.stats), manifest)
+    env.close()

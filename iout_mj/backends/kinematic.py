@@ -1,8 +1,9 @@
 """The paper's discrete-time kinematics and cubic energy model: the fast backend (no MuJoCo).
 
-Same spaces, mission rules, reward and metrics as the MuJoCo task (`iout_mj.mission.Mission`); the
-vehicles jump to p + v_sp * slot * (cos theta_sp, sin theta_sp) each slot, a move that would
-leave the area is rejected (the AUV stays), and propulsion energy is `propulsion.slot_energy_j`.
+Same spaces, mission rules, reward and metrics as the MuJoCo task (`iout_mj.mission.Mission`);
+the vehicles jump to p + v_sp * slot * (cos theta_sp, sin theta_sp) + current * slot each
+slot, a move that would end outside the area is rejected (the AUV stays), and propulsion
+energy is `propulsion.travel_energy_j` (the hotel load is booked by the mission).
 `move` works on one environment or on a batch; `KinematicEnvironment` is the dm_env of one,
 `iout_mj.envs.KinematicVecEnv` steps B of them per call.
 """
@@ -25,11 +26,20 @@ PATH_FRACTIONS = np.linspace(0.0, 1.0, 6)[1:]
 
 
 def move(m: Mission, action: Any) -> Any:
-    """One slot of the kinematic model for every environment of `m`; returns the reward."""
-    start = m.state.positions_m.copy()
+    """One slot of the kinematic model for every environment of `m`; returns the reward.
+
+    Each AUV flies its setpoints through the water and drifts with the ocean current (as the
+    physics does); a move that would end outside the area is rejected (the AUV stays).
+    Propulsion energy is the paper's, for the distance flown through the water."""
+    s = m.state
+    start = s.positions_m.copy()
     heading, speed = m.begin_slot(action)
-    end = np.where(m.state.boundary_attempt[..., None], start, m.state.straight_end_m)
-    prop = propulsion.travel_energy_j(speed, norm_xy(end - start), m.cfg.motion)
+    drift = np.where(s.docked[..., None], 0.0, s.current_mps[..., None, :] * m.cfg.scenario.slot_s)
+    end = s.straight_end_m + drift
+    rejected = s.boundary_attempt | ((end < 0) | (end > m.area_m)).any(axis=-1)
+    end = np.where(rejected[..., None], start, end)
+    through_water_m = np.where(rejected, 0.0, norm_xy(s.straight_end_m - start))
+    prop = propulsion.travel_energy_j(speed, through_water_m, m.cfg.motion)
     fraction = PATH_FRACTIONS.reshape(-1, *[1] * end.ndim)
     return m.end_slot(
         end,

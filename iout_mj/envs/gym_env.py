@@ -111,6 +111,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         self.observation_space, self.action_space = spaces(self.mission)
         self._last_obs = np.zeros(self.observation_space.shape, dtype=np.float32)
         self._renderer: MissionRenderer | None = None
+        self._needs_reset = True
 
     @property
     def physics(self) -> Any:
@@ -131,11 +132,16 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        if seed is not None and (
+            isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0
+        ):
+            raise ValueError(f"seed={seed!r} is invalid: accepted an integer >= 0 or None")
         super().reset(seed=seed)
         if seed is not None:
             target = self._env.task if self.backend == "mujoco" else self._env
             target.reseed(seed)
         ts = self._env.reset()
+        self._needs_reset = False
         self._last_obs = flatten_observation(ts.observation)
         if self.render_mode is not None:
             self.renderer.reset()
@@ -144,6 +150,10 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         return self._last_obs.copy(), {"slot": 0}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._needs_reset:
+            raise RuntimeError(
+                "step() before reset() or after the episode ended: call reset() first"
+            )
         mission = self.mission
         try:
             ts = self._env.step(action)
@@ -155,6 +165,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         self._last_obs = obs
         terminated = bool(ts.last() and ts.discount == 0.0)
         truncated = bool(ts.last() and not terminated)
+        self._needs_reset = terminated or truncated
         terms = {k: float(v) for k, v in mission.terms.items()}
         info = {"reward_terms": terms, "slot": int(mission.state.slot)}
         if ts.last():
@@ -167,6 +178,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
 
     def _failed(self, error: str) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """The step of a diverged physics: the episode ends, the error is reported."""
+        self._needs_reset = True
         info = {
             "error": error,
             "metrics": self.mission.metrics(),

@@ -65,6 +65,12 @@ class MissionVecEnv(VecEnv):
         self._actions: Any = None
         self._none_failed = np.zeros(self.num_envs, dtype=bool)
 
+    def set_random_state(self, rng: np.random.RandomState) -> None:
+        """Continue the batch's random stream from `rng` (a resumed run), dropping any seed
+        given with `seed()` that the next `reset()` would otherwise apply."""
+        self.random = rng
+        self._reset_seeds()
+
     # ------------------------------------------------------------------ subclass hooks
     def _move(self, actions: Any) -> tuple[FloatArray, BoolArray]:
         """One slot for every environment: rewards, and which envs failed (diverged)."""

@@ -291,8 +291,8 @@ def memory_mb(n_envs: int = PHYSICS_BATCH) -> dict[str, float]:
     return {"one_env_mb": one, "training_mb": train, "training_envs": n_envs}
 
 
-def run_all(quick: bool = False) -> dict[str, Any]:
-    """Every benchmark; `quick` shrinks repeats for tests."""
+def run_all(quick: bool = False, say: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
+    """Every benchmark; `quick` shrinks repeats for tests; `say(stage)` before each stage."""
     cfg = Config()
     sizes = [(1, 7), (2, 7), (2, 13), (4, 13)] if not quick else [(2, 7)]
     result: dict[str, Any] = {
@@ -304,7 +304,9 @@ def run_all(quick: bool = False) -> dict[str, Any]:
         "timestep_s": cfg.physics.timestep_s,
         "substeps_per_slot": round(cfg.scenario.slot_s / cfg.physics.timestep_s),
     }
+    say("slot_vs_raw (MuJoCo env vs plain mj_step)")
     result["slot_vs_raw"] = {f"N{n}_K{k}": slot_vs_raw(n, k, 10 if quick else 40) for n, k in sizes}
+    say("kinematic steps/s")
     kin = {
         f"N{n}_K{k}": kinematic_rate(n, k, 300 if quick else 3000)
         for n, k in ([(2, 13)] if quick else [(1, 7), (1, 13), (2, 7), (2, 13), (4, 7), (4, 13)])
@@ -314,7 +316,10 @@ def run_all(quick: bool = False) -> dict[str, Any]:
     result["kinematic_batch"] = KINEMATIC_BATCH
     result["physics_batch"] = PHYSICS_BATCH
     n_envs, rollouts = (2, 1) if quick else (PHYSICS_BATCH, 2)
-    fps = {b: ppo_fps(b, 2, 7, n_envs, rollouts) for b in ("mujoco", "kinematic", None)}
+    fps = {}
+    for backend in ("mujoco", "kinematic", None):
+        say(f"PPO steps/s on {backend or 'a trivial env'}")
+        fps[backend] = ppo_fps(backend, 2, 7, n_envs, rollouts)
     result["ppo_fps"] = {
         "physics": fps["mujoco"],
         "kinematic": fps["kinematic"],
@@ -322,9 +327,13 @@ def run_all(quick: bool = False) -> dict[str, Any]:
     }
     result["ppo_fps_ratio"] = fps["mujoco"] / fps[None]
     steps = 10 if quick else 60
+    say("worker-process scaling")
     one, two = _worker_rate(1, 2, 7, steps), _worker_rate(2, 2, 7, steps)
     result["subproc_scaling"] = two / one
+    say("rollout-thread scaling")
     result["thread_scaling"] = thread_scaling(2, 7, 2 if quick else 5)
+    say("render frames/s")
     result["render_fps"] = render_fps(4 if quick else 16)
+    say("peak memory")
     result["memory"] = memory_mb(2 if quick else PHYSICS_BATCH)
     return result

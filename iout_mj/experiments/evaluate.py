@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from iout_mj.agents.policies import load_policy
+from iout_mj.agents.policies import PolicyError, load_policy
 from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
 from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
@@ -28,10 +28,14 @@ from iout_mj.scenarios import fixed_config
 TRACE_NODES = 7
 
 
-def _episode(job: tuple[str, int, int, int, str, bool]) -> dict[str, Any]:
-    policy_name, n_auvs, n_nodes, seed, backend, keep_trace = job
+Job = tuple[str, int, int, int, str, bool, bool]
+"""(policy, N, K, seed, backend, keep the trace, trust pickle)."""
+
+
+def _episode(job: Job) -> dict[str, Any]:
+    policy_name, n_auvs, n_nodes, seed, backend, keep_trace, trust_pickle = job
     env = gym.make(ENV_ID, backend=backend, config=fixed_config(n_auvs, n_nodes))
-    policy = load_policy(policy_name, env, seed)
+    policy = load_policy(policy_name, env, seed, trust_pickle)
     metrics = run_episode(env, policy, seed)
     row: dict[str, Any] = {
         "policy": policy_name,
@@ -47,12 +51,24 @@ def _episode(job: tuple[str, int, int, int, str, bool]) -> dict[str, Any]:
     return row
 
 
-def _check_policies(policies: list[str], n_auvs: list[int], nodes: list[int], backend: str) -> None:
-    """Fail early (before any worker starts) on unknown or incompatible policies."""
+def _cells(
+    policies: list[str], n_auvs: list[int], nodes: list[int], trust_pickle: bool
+) -> tuple[list[tuple[str, int, int]], list[str]]:
+    """The (policy, N, K) cells a policy can serve, and why the others are skipped. An
+    unknown or unreadable policy fails here, before any worker starts."""
+    cells, skipped = [], []
     for name, n, k in product(policies, n_auvs, nodes):
         env = gym.make(ENV_ID, backend="kinematic", config=fixed_config(n, k))
-        load_policy(name, env)
-        env.close()
+        try:
+            load_policy(name, env, trust_pickle=trust_pickle)
+            cells.append((name, n, k))
+        except PolicyError as exc:
+            if "trained for" not in str(exc):
+                raise
+            skipped.append(f"skipped {name} at N={n}, K={k}: {exc}")
+        finally:
+            env.close()
+    return cells, skipped
 
 
 def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -87,14 +103,22 @@ def evaluate(
     backend: str,
     workers: int | None = None,
     progress: bool = True,
+    trust_pickle: bool = False,
+    skipped: list[str] | None = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """Run every (policy, N, K, episode); returns (summary rows, episode rows)."""
+    """Run every (policy, N, K, episode) a policy can serve; returns (summary rows, episode
+    rows). Cells a trained policy cannot serve (another N or K) are skipped and said in
+    `skipped`."""
     if episodes < 1:
         raise ValueError(f"episodes={episodes}: accepted an integer >= 1")
-    _check_policies(policies, n_auvs, nodes, backend)
-    jobs = [
-        (p, n, k, seed + e, backend, e == 0 and k == TRACE_NODES)
-        for p, n, k, e in product(policies, n_auvs, nodes, range(episodes))
+    cells, notes = _cells(policies, n_auvs, nodes, trust_pickle)
+    if skipped is not None:
+        skipped.extend(notes)
+    if not cells:
+        raise PolicyError("no policy can serve any of the asked (N, K): " + "; ".join(notes))
+    jobs: list[Job] = [
+        (p, n, k, seed + e, backend, e == 0 and k == TRACE_NODES, trust_pickle)
+        for (p, n, k), e in product(cells, range(episodes))
     ]
     workers = workers or min(len(jobs), os.cpu_count() or 1)
     bar = tqdm(total=len(jobs), desc="episodes", unit="ep", disable=not progress)

@@ -19,7 +19,7 @@ from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
 from iout_mj.experiments.figures import trajectory_figure
-from iout_mj.scenarios import ConfigLike, fixed_config
+from iout_mj.scenarios import ConfigLike, load_config
 
 
 def use_bundled_ffmpeg() -> None:
@@ -30,8 +30,7 @@ def use_bundled_ffmpeg() -> None:
 
 def run_mission(
     policy: str = "planner",
-    n_auvs: int = 2,
-    n_nodes: int = 7,
+    config: ConfigLike = None,
     backend: str = "mujoco",
     seed: int = 0,
     out: Path = Path("renders"),
@@ -39,14 +38,16 @@ def run_mission(
     width: int = 960,
     height: int = 540,
     fps: int = 30,
-    config: ConfigLike = None,
     slots: int | None = None,
     name: str = "mission",
+    trust_pickle: bool = False,
 ) -> dict[str, Any]:
     """Fly one mission and write `<name>.json`, `<name>_trajectory.png`, and (with `video`)
-    `<name>.mp4` plus its last frame `<name>.png` into `out`. The layout is the scenario's
-    fixed one (`scenarios.fixed_config`): the paper's for K = 7 and 13."""
-    cfg = fixed_config(n_auvs, n_nodes, config)
+    `<name>.mp4` plus its last frame `<name>.png` into `out`. `config` is used as it is (the
+    paper's defaults for None: N = 2, K = 7). A mission whose physics diverged has
+    `metrics["valid"] = False` and the error in `metrics["error"]`."""
+    cfg = load_config(config)
+    n_auvs, n_nodes = cfg.scenario.n_auvs, cfg.scenario.n_nodes
     if slots is not None:
         if slots < 1:
             raise ValueError(f"slots={slots}: accepted an integer >= 1")
@@ -60,7 +61,7 @@ def run_mission(
         width=width,
         height=height,
     )
-    act = load_policy(policy, env, seed)
+    act = load_policy(policy, env, seed, trust_pickle)
     writer = None
     bar = tqdm(
         total=cfg.scenario.horizon_slots,
@@ -87,10 +88,13 @@ def run_mission(
     try:
         metrics = run_episode(env, act, seed, on_step)
     finally:
+        bar.total = bar.n  # an early docking ends the mission before T_max: 100 %
+        bar.refresh()
         bar.close()
         if writer is not None:
             writer.__exit__(None, None, None)
     elapsed = time.perf_counter() - start
+    metrics["valid"] = "error" not in metrics
     if frames:
         mediapy.write_image(out / f"{name}.png", frames[-1])
     trace = env.unwrapped.mission.trace()  # type: ignore[attr-defined]

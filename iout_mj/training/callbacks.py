@@ -39,8 +39,10 @@ class MissionLoggerCallback(BaseCallback):
 
 
 class EvalCheckpointCallback(BaseCallback):
-    """Every `every_steps`, `checkpoint(model)` evaluates and saves; stops the phase at
-    `phase_end` steps; `progress(num_timesteps)` after every step."""
+    """At the first rollout start after every `every_steps` steps, `checkpoint(model)`
+    evaluates and saves (between an update and the next collection, so weights, optimizer and
+    RNGs are consistent); stops the phase at `phase_end`; `progress(num_timesteps)` after
+    every step."""
 
     def __init__(
         self,
@@ -55,9 +57,11 @@ class EvalCheckpointCallback(BaseCallback):
         self.last_eval = start_timesteps
         self.checkpoint, self.progress = checkpoint, progress
 
-    def _on_step(self) -> bool:
-        self.progress(self.model.num_timesteps)
+    def _on_rollout_start(self) -> None:
         if self.model.num_timesteps - self.last_eval >= self.every_steps:
             self.last_eval = self.model.num_timesteps
             self.checkpoint(self.model)
+
+    def _on_step(self) -> bool:
+        self.progress(self.model.num_timesteps)
         return self.model.num_timesteps < self.phase_end

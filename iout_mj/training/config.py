@@ -2,13 +2,26 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from iout_mj.schema import ConfigError, build_dataclass, load_mapping
+from iout_mj.config import MAX_AUVS, MAX_NODES, MIN_NODES
+from iout_mj.paper import PAPER_LAYOUTS
+from iout_mj.scenarios import LAYOUTS
+from iout_mj.schema import (
+    ConfigError,
+    build_dataclass,
+    check_finite,
+    finite_at_least,
+    load_mapping,
+    positive,
+    require,
+)
 
 BACKENDS = ("mujoco", "kinematic")
+NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 
 
 @dataclass(frozen=True)
@@ -19,10 +32,8 @@ class PhaseConfig:
     timesteps: int = 100_000
 
     def __post_init__(self) -> None:
-        if self.backend not in BACKENDS:
-            raise ConfigError(f"phase backend={self.backend!r}: accepted 'mujoco' or 'kinematic'")
-        if self.timesteps < 1:
-            raise ConfigError(f"phase timesteps={self.timesteps}: accepted an integer >= 1")
+        require(self.backend in BACKENDS, "backend", self.backend, f"one of {BACKENDS}")
+        require(self.timesteps >= 1, "timesteps", self.timesteps, "an integer >= 1")
 
 
 @dataclass(frozen=True)
@@ -53,8 +64,38 @@ class TrainConfig:
     torch_threads: int = 1
 
     def __post_init__(self) -> None:
-        if self.n_envs < 1 or self.n_steps < 1 or self.batch_size < 1:
-            raise ConfigError("n_envs, n_steps and batch_size: accepted integers >= 1")
+        check_finite(self)
+        require(bool(NAME.fullmatch(self.name)), "name", self.name, "letters, digits, - _ .")
+        require(1 <= self.n_auvs <= MAX_AUVS, "n_auvs", self.n_auvs, f"1 to {MAX_AUVS}")
+        require(
+            MIN_NODES <= self.n_nodes <= MAX_NODES,
+            "n_nodes",
+            self.n_nodes,
+            f"{MIN_NODES} to {MAX_NODES}",
+        )
+        require(self.layout in LAYOUTS, "layout", self.layout, f"one of {LAYOUTS}")
+        if self.layout == "paper":
+            require(
+                self.n_nodes in PAPER_LAYOUTS,
+                "n_nodes",
+                self.n_nodes,
+                f"{sorted(PAPER_LAYOUTS)} with layout 'paper'",
+            )
+        for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "eval_every_steps"):
+            require(getattr(self, name) >= 1, name, getattr(self, name), "an integer >= 1")
+        require(self.eval_episodes >= 1, "eval_episodes", self.eval_episodes, "an integer >= 1")
+        require(self.torch_threads >= 1, "torch_threads", self.torch_threads, "an integer >= 1")
+        require(self.seed >= 0, "seed", self.seed, "an integer >= 0")
+        positive(self, "learning_rate", "clip_range")
+        finite_at_least(self, 0.0, "learning_rate_final", "ent_coef")
+        require(0 < self.gamma <= 1, "gamma", self.gamma, "a number in (0, 1]")
+        require(0 <= self.gae_lambda <= 1, "gae_lambda", self.gae_lambda, "a number in [0, 1]")
+        require(
+            bool(self.net_arch) and all(w >= 1 for w in self.net_arch),
+            "net_arch",
+            self.net_arch,
+            "a non-empty list of layer widths >= 1",
+        )
         if (self.n_envs * self.n_steps) % self.batch_size:
             raise ConfigError(
                 f"batch_size={self.batch_size} must divide n_envs*n_steps="

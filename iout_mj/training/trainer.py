@@ -5,6 +5,7 @@ normalisation statistics)."""
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -17,13 +18,19 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
-from iout_mj.agents.policies import model_policy
+from iout_mj.agents.policy_format import (
+    MANIFEST,
+    LoadedPolicy,
+    Normalizer,
+    read_manifest,
+    write_atomic,
+)
 from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
 from iout_mj.mission.stats import episode_summary
 from iout_mj.schema import ConfigError
 from iout_mj.training.callbacks import EvalCheckpointCallback, MissionLoggerCallback
-from iout_mj.training.checkpoints import RunState, save_checkpoint
+from iout_mj.training.checkpoints import Resumed, RunState, recover, restore, save_checkpoint
 from iout_mj.training.config import TrainConfig
 
 HELD_OUT_SEED = 1_000_000
@@ -68,7 +75,11 @@ def evaluate_model(
 ) -> dict[str, float]:
     """Deterministic episodes on held-out seeds: the mean episode summary and return."""
     env = scenario_env(cfg, backend)
-    policy = model_policy(model, stats)
+    loaded = LoadedPolicy(model.policy, Normalizer.from_vec_normalize(stats), {})
+
+    def policy(env: Any, obs: np.ndarray) -> Any:
+        return loaded.act(obs)
+
     rows = []
     for e in range(episodes):
         metrics = run_episode(env, policy, seed + e)
@@ -104,33 +115,34 @@ def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> A
     )
 
 
-def _start(cfg: TrainConfig, out: Path, resume: bool) -> RunState:
-    """The state to start from: a fresh run, or the saved one with `resume`."""
-    out.mkdir(parents=True, exist_ok=True)
+RUN_FILES = ("config.yaml", "state.json", "last", "best", "last.tmp", "last.old", "best.tmp")
+
+
+def _start(cfg: TrainConfig, out: Path, resume: bool, overwrite: bool) -> None:
+    """Check the run folder: a run to resume, or a folder free for a new run."""
     if resume:
-        if not ((out / "state.json").is_file() and (out / "last" / "model.zip").is_file()):
-            raise FileNotFoundError(f"nothing to resume in {out}: no last/ checkpoint")
+        recover(out / "last")
+        if not (out / "last" / MANIFEST).is_file():
+            raise FileNotFoundError(f"nothing to resume in {out}: no complete last/ checkpoint")
         if TrainConfig.load(out / "config.yaml") != cfg:
             raise ConfigError(f"--resume with a different config than {out / 'config.yaml'}")
-        return RunState.load(out / "state.json")
-    if (out / "last").exists():
-        raise FileExistsError(f"{out} already holds a run: use --resume, or another --out")
-    (out / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
-    return RunState()
-
-
-def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path, resume: bool) -> Any:
-    """The model of a phase on `venv`: loaded from `last/` when resuming, new for the first
-    phase, else the previous phase's model and statistics on the new backend."""
-    if model is None and resume and (out / "last").exists():
-        venv = VecNormalize.load(str(out / "last" / "vecnormalize.pkl"), venv)
-        schedule = _lr_schedule(cfg)
-        return PPO.load(
-            out / "last" / "model.zip",
-            env=venv,
-            device="cpu",
-            custom_objects={"learning_rate": schedule, "lr_schedule": schedule},
+        return
+    existing = [name for name in RUN_FILES if (out / name).exists()]
+    if existing and not overwrite:
+        raise FileExistsError(
+            f"{out} already holds a run ({', '.join(existing)}): use --resume to continue it, "
+            "--overwrite to start again, or another --out"
         )
+    for name in existing:
+        path = out / name
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False).encode())
+
+
+def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path) -> Any:
+    """The model of a phase on `venv`: new for the first phase (or to be restored from a
+    checkpoint), else the previous phase's model and statistics on the new backend."""
     normalized = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
     if model is None:
         return new_model(cfg, normalized, out / "tb")
@@ -142,11 +154,21 @@ def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path, resume: boo
 
 
 def train(
-    cfg: TrainConfig, out: Path, resume: bool = False, progress: bool = True, parallel: bool = True
+    cfg: TrainConfig,
+    out: Path,
+    resume: bool = False,
+    progress: bool = True,
+    parallel: bool = True,
+    overwrite: bool = False,
 ) -> RunState:
-    """Train PPO through every phase; checkpoints in `out`."""
+    """Train PPO through every phase; checkpoints in `out` (see `training.checkpoints`)."""
     torch.set_num_threads(cfg.torch_threads)
-    state = _start(cfg, out, resume)
+    _start(cfg, out, resume, overwrite)
+    state = RunState()
+    model: Any = None
+    resumed: Resumed | None = None
+    if resume:  # the run state is the checkpoint's own
+        state = RunState(**read_manifest(out / "last")["run_state"])
     bar = tqdm(
         total=cfg.total_timesteps,
         initial=state.num_timesteps,
@@ -155,15 +177,16 @@ def train(
         disable=not progress,
     )
     phase_start = sum(p.timesteps for p in cfg.phases[: state.phase])
-    model: Any = None
-    backend = cfg.phases[state.phase].backend if state.phase < len(cfg.phases) else ""
+    index = state.phase
 
     def progress_to(num_timesteps: int) -> None:
         bar.update(num_timesteps - bar.n)
 
     def checkpoint(model: Any) -> None:
-        stats = model.get_vec_normalize_env()
-        metrics = evaluate_model(model, stats, cfg, backend, cfg.eval_episodes)
+        backend = cfg.phases[min(index, len(cfg.phases) - 1)].backend
+        metrics = evaluate_model(
+            model, model.get_vec_normalize_env(), cfg, backend, cfg.eval_episodes
+        )
         if getattr(model, "_logger", None) is not None:  # absent until learn() ran
             for k, v in metrics.items():
                 model.logger.record(f"eval/{k}", v)
@@ -172,28 +195,32 @@ def train(
         entry.update(metrics)
         state.history.append(entry)
         score = selection_score(metrics)
+        extra = {"eval": entry, "env_phase": index}
         if score > state.best_score:
             state.best_score = score
-            save_checkpoint(model, stats, out / "best", cfg, {"eval": entry})
-        save_checkpoint(model, stats, out / "last", cfg, {"eval": entry})
+            save_checkpoint(model, out / "best", cfg, state, extra)
+        save_checkpoint(model, out / "last", cfg, state, extra)
         state.save(out / "state.json")
 
     for index in range(state.phase, len(cfg.phases)):
         phase = cfg.phases[index]
-        backend = phase.backend
         phase_end = phase_start + phase.timesteps
-        venv = vec_env(cfg, backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
-        model = _phase_model(model, cfg, venv, out, resume or index > 0)
-        remaining = phase_end - model.num_timesteps
-        if remaining > 0:
+        venv = vec_env(cfg, phase.backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
+        model = _phase_model(model, cfg, venv, out)
+        if resume and resumed is None:
+            resumed = restore(model, out / "last")
+            mid_phase = read_manifest(out / "last").get("env_phase") == index
+            # the batch continues its stream mid-phase; a new phase starts it from its seed,
+            # as an uninterrupted run does (PPO's constructor must not reseed it)
+            seed = cfg.seed * 1000 + index * 100
+            venv.unwrapped.set_random_state(
+                resumed.env_rng if mid_phase else np.random.RandomState(seed)
+            )
+        if phase_end - model.num_timesteps > 0:
             callbacks = [
                 MissionLoggerCallback(model.num_timesteps),
                 EvalCheckpointCallback(
-                    cfg.eval_every_steps,
-                    phase_end,
-                    model.num_timesteps,
-                    checkpoint,
-                    progress_to,
+                    cfg.eval_every_steps, phase_end, model.num_timesteps, checkpoint, progress_to
                 ),
             ]
             # SB3 counts the schedule over num_timesteps / (num_timesteps + remaining); the

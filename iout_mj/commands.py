@@ -1,0 +1,188 @@
+"""The commands of `iout-mj`, one function each (the parser is in `cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from iout_mj.cli_args import load_config, scenario_from_flags, writable_dir
+from iout_mj.experiments import bench, bench_report, energy_validation, evaluate, figures
+from iout_mj.experiments.mission import run_mission
+from iout_mj.scenarios import fixed_config
+from iout_mj.training import TrainConfig, train
+from iout_mj.world import acoustics
+
+DIVERGED = 3
+"""Exit code of a mission whose physics diverged (its metrics are written, marked invalid)."""
+
+
+def cmd_link_budget(args: argparse.Namespace) -> int:
+    cfg = load_config(args.config).acoustics
+    d = np.asarray(args.distance, dtype=float)
+    rows = [
+        {
+            "distance_m": float(di),
+            "harvest_power_w": float(hp),
+            "harvest_energy_j": float(he),
+            "uplink_power_w": float(up),
+            "uplink_energy_j": float(ue),
+        }
+        for di, hp, he, up, ue in zip(
+            d,
+            acoustics.harvest_power_w(d, cfg),
+            acoustics.harvest_energy_j(d, cfg),
+            acoustics.uplink_power_w(d, cfg),
+            acoustics.uplink_energy_j(d, cfg),
+            strict=True,
+        )
+    ]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(
+        f"AET at {cfg.f_wet_khz:g} kHz, P_tx {cfg.p_tx_w:g} W; uplink at {cfg.f_data_khz:g} kHz,"
+        f" {cfg.data_rate_bps / 1e3:g} kbit/s over {cfg.bandwidth_hz:g} Hz; "
+        f"slot {cfg.charging_s:g} s; noise '{cfg.noise_model}'"
+    )
+    print(
+        f"{'distance m':>11} {'harvest W':>11} {'harvest J':>11} {'uplink W':>11} {'uplink J':>11}"
+    )
+    for r in rows:
+        print(
+            f"{r['distance_m']:>11.1f} {r['harvest_power_w']:>11.4g} "
+            f"{r['harvest_energy_j']:>11.4g} {r['uplink_power_w']:>11.4g} "
+            f"{r['uplink_energy_j']:>11.4g}"
+        )
+    return 0
+
+
+def cmd_validate_energy(args: argparse.Namespace) -> int:
+    cfg = fixed_config(1, 7, load_config(args.config))
+    figure = writable_dir(Path(args.out)) / "energy_validation.png"
+    print("validate-energy: steady state, manoeuvres, timestep test (about 5 s)", file=sys.stderr)
+    result = energy_validation.validate(cfg, figure=figure)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(energy_validation.format_table(result))
+        print(f"\nfigure: {figure}")
+    return 0
+
+
+def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) -> dict[str, Any]:
+    cfg = scenario_from_flags(args.config, args.n_auvs, args.nodes)
+    return run_mission(
+        policy=args.policy,
+        config=cfg,
+        backend=args.backend,
+        seed=args.seed,
+        out=writable_dir(out),
+        video=video,
+        width=args.width,
+        height=args.height,
+        fps=args.fps,
+        slots=args.slots,
+        name=name,
+        trust_pickle=args.trust_pickle,
+    )
+
+
+def _diverged(summary: dict[str, Any], command: str) -> int:
+    if summary["metrics"]["valid"]:
+        return 0
+    print(f"iout-mj {command}: error: {summary['metrics']['error']}", file=sys.stderr)
+    return DIVERGED
+
+
+def cmd_mission(args: argparse.Namespace) -> int:
+    summary = _run_mission(args, Path(args.out), "mission", video=not args.no_video)
+    print(json.dumps(summary, indent=2))
+    return _diverged(summary, "mission")
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    video = Path(args.out)
+    if video.suffix != ".mp4":
+        raise ValueError(f"--out {video}: accepted a path ending in .mp4")
+    summary = _run_mission(args, video.parent, video.stem, video=True)
+    print(f"{video} ({summary['video_frames']} frames), {video.with_suffix('.png')}")
+    return _diverged(summary, "render")
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    out = writable_dir(Path(args.out)) if args.out else None
+    skipped: list[str] = []
+    rows, episodes = evaluate.evaluate(
+        args.policy,
+        args.n_auvs,
+        args.nodes,
+        args.episodes,
+        args.seed,
+        args.backend,
+        workers=args.workers,
+        trust_pickle=args.trust_pickle,
+        skipped=skipped,
+    )
+    for note in skipped:
+        print(note, file=sys.stderr)
+    if out:
+        evaluate.save(rows, episodes, out)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        print(evaluate.format_table(rows))
+        if out:
+            print(f"\nsaved: {out / 'results.csv'} and results.json")
+    return 0
+
+
+def cmd_figures(args: argparse.Namespace) -> int:
+    if not args.results and not args.runs:
+        raise ValueError("figures: give --results DIR and/or --runs RUN [RUN ...]")
+    out = writable_dir(Path(args.out or args.results or "renders"))
+    if args.results:
+        for path in figures.figures_from_results(Path(args.results), out):
+            print(path)
+    if args.runs:
+        print(figures.training_curves([Path(r) for r in args.runs], out / "training_curves.png"))
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    cfg = TrainConfig.load(args.config)
+    out = writable_dir(Path(args.out or f"runs/{cfg.name}"))
+    state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
+    summary = {
+        "out": str(out),
+        "num_timesteps": state.num_timesteps,
+        "last_eval": state.history[-1] if state.history else None,
+    }
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    if args.out:
+        writable_dir(Path(args.out).parent)
+    if args.from_json:
+        path = Path(args.from_json)
+        if not path.is_file():
+            raise FileNotFoundError(f"--from-json {path} does not exist")
+        result = json.loads(path.read_text())
+    else:
+        result = bench.run_all(
+            quick=args.quick, say=lambda stage: print(f"bench: {stage} ...", file=sys.stderr)
+        )
+    if args.out:
+        Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        report = bench_report.format_markdown if args.markdown else bench_report.format_table
+        print(report(result))
+    return 0

@@ -1,0 +1,178 @@
+"""No file the project loads runs code; damaged or foreign policies give one clear error."""
+
+import base64
+import io
+import json
+import pickle
+import shutil
+import zipfile
+
+import cloudpickle
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+from iout_mj.agents.policies import SHIPPED_DIR, PolicyError, load_policy, read_trained
+from iout_mj.agents.policy_format import (
+    MANIFEST,
+    NORMALIZATION,
+    WEIGHTS,
+    load_policy_folder,
+    sha256,
+)
+from iout_mj.envs import ENV_ID
+
+
+class Payload:
+    """Unpickling this creates `marker` (a stand-in for any code an attacker would run)."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def legacy_policy(folder, marker):
+    """A legacy SB3 policy folder for N = 1, K = 7 whose zip and pickle both carry a payload."""
+    env = gym.make(ENV_ID, backend="kinematic", n_auvs=1, n_nodes=7)
+    venv = VecNormalize(DummyVecEnv([lambda: env]))
+    PPO("MlpPolicy", venv, n_steps=8, batch_size=8, device="cpu").save(folder / "clean.zip")
+    with (
+        zipfile.ZipFile(folder / "clean.zip") as src,
+        zipfile.ZipFile(folder / "model.zip", "w") as dst,
+    ):
+        for item in src.namelist():
+            data = src.read(item)
+            if item == "data":
+                d = json.loads(data)
+                blob = base64.b64encode(cloudpickle.dumps(Payload(marker))).decode()
+                d["policy_kwargs"] = {":type:": "<class 'dict'>", ":serialized:": blob}
+                data = json.dumps(d).encode()
+            dst.writestr(item, data)
+    (folder / "clean.zip").unlink()
+    (folder / "vecnormalize.pkl").write_bytes(pickle.dumps(Payload(marker)))
+    return folder
+
+
+@pytest.fixture
+def malicious(tmp_path):
+    folder = tmp_path / "downloaded-policy"
+    folder.mkdir()
+    return legacy_policy(folder, tmp_path / "PWNED"), tmp_path / "PWNED"
+
+
+def test_every_loading_path_refuses_a_pickled_policy(malicious, cli, tmp_path):
+    folder, marker = malicious
+    env = gym.make(ENV_ID, backend="kinematic", n_auvs=1, n_nodes=7)
+    with pytest.raises(PolicyError, match="--trust-pickle"):
+        load_policy(str(folder), env)
+    for args in (
+        ("evaluate", "--policy", folder, "--n-auvs", "1", "--episodes", "1"),
+        ("mission", "--policy", folder, "--n-auvs", "1", "--no-video", "--out", tmp_path / "m"),
+        ("render", "--policy", folder, "--n-auvs", "1", "--out", tmp_path / "r.mp4"),
+    ):
+        out = cli(*args, check=False)
+        assert out.returncode == 2 and "--trust-pickle" in out.stderr, out.stderr
+    run = tmp_path / "run"
+    (run / "last").mkdir(parents=True)
+    for name in ("model.zip", "vecnormalize.pkl"):
+        shutil.copy(folder / name, run / "last" / name)
+    (run / "config.yaml").write_text("name: t\nn_auvs: 1\n")
+    out = cli("train", "--config", run / "config.yaml", "--out", run, "--resume", check=False)
+    assert out.returncode == 2 and "no complete last/ checkpoint" in out.stderr
+    assert not marker.exists()
+
+
+def test_trusting_a_pickle_is_explicit_and_works(tmp_path):
+    folder = tmp_path / "legacy"
+    folder.mkdir()
+    env = gym.make(ENV_ID, backend="kinematic", n_auvs=1, n_nodes=7)
+    venv = VecNormalize(DummyVecEnv([lambda: env]))
+    PPO("MlpPolicy", venv, n_steps=8, batch_size=8, device="cpu").save(folder / "model.zip")
+    venv.save(str(folder / "vecnormalize.pkl"))
+    policy = load_policy(str(folder), env, trust_pickle=True)
+    obs, _ = env.reset(seed=0)
+    assert env.action_space.contains(policy(env, obs))
+    (folder / "vecnormalize.pkl").unlink()
+    with pytest.raises(PolicyError, match=r"vecnormalize\.pkl is missing"):
+        load_policy(str(folder), env, trust_pickle=True)
+
+
+def test_loading_a_shipped_policy_never_unpickles(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("unpickling during a safe load")
+
+    monkeypatch.setattr(pickle, "load", refuse)
+    monkeypatch.setattr(pickle, "loads", refuse)
+    monkeypatch.setattr(pickle, "Unpickler", refuse)
+    loaded = load_policy_folder(SHIPPED_DIR / "ppo-n2-k7")
+    assert loaded.act(np.zeros(loaded.manifest["observation_size"], np.float32)).shape == (8,)
+
+
+@pytest.fixture
+def copy_of_shipped(tmp_path):
+    folder = tmp_path / "p"
+    shutil.copytree(SHIPPED_DIR / "ppo-n1-k7", folder)
+    return folder
+
+
+def _rehash(folder):
+    manifest = json.loads((folder / MANIFEST).read_text())
+    manifest["files"] = {name: sha256(folder / name) for name in manifest["files"]}
+    (folder / MANIFEST).write_text(json.dumps(manifest))
+
+
+@pytest.mark.parametrize(
+    ("damage", "match"),
+    [
+        (lambda f: (f / NORMALIZATION).unlink(), "normalization.json is missing"),
+        (lambda f: (f / WEIGHTS).write_bytes((f / WEIGHTS).read_bytes()[:-9]), "SHA-256"),
+        (
+            lambda f: ((f / WEIGHTS).write_bytes((f / WEIGHTS).read_bytes()[:5000]), _rehash(f)),
+            "not a valid safetensors",
+        ),
+        (lambda f: (f / MANIFEST).write_text("{"), "not valid JSON"),
+        (lambda f: (f / MANIFEST).write_text('{"format": "other"}'), "not an iout-mj-policy"),
+        (
+            lambda f: (f / MANIFEST).write_text(
+                (f / MANIFEST).read_text().replace('"schema_version": 1', '"schema_version": 9')
+            ),
+            "schema_version 9",
+        ),
+        (
+            lambda f: (
+                (f / NORMALIZATION).write_text(json.dumps({"obs_mean": [0.0]})),
+                _rehash(f),
+            ),
+            "bad or missing field",
+        ),
+    ],
+)
+def test_damaged_policy_folders_give_one_clear_error(copy_of_shipped, damage, match):
+    damage(copy_of_shipped)
+    env = gym.make(ENV_ID, backend="kinematic", n_auvs=1, n_nodes=7)
+    with pytest.raises(PolicyError, match=match):
+        read_trained(str(copy_of_shipped), env)
+
+
+def test_a_policy_refuses_another_action_mapping(copy_of_shipped):
+    env = gym.make(
+        ENV_ID,
+        backend="kinematic",
+        n_auvs=1,
+        n_nodes=7,
+        config={"motion": {"dtheta_max_deg": 15.0}},
+    )
+    with pytest.raises(PolicyError, match=r"motion.dtheta_max_deg=25.0; this env has 15.0"):
+        read_trained(str(copy_of_shipped), env)
+
+
+def test_policy_manifest_records_the_env_config():
+    manifest = json.loads((SHIPPED_DIR / "ppo-n2-k7" / MANIFEST).read_text())
+    assert manifest["env_config"]["scenario"]["n_auvs"] == 2
+    assert set(manifest["files"]) == {WEIGHTS, NORMALIZATION}
+    raw = io.BytesIO((SHIPPED_DIR / "ppo-n2-k7" / WEIGHTS).read_bytes())
+    assert raw.read(8)  # safetensors: an 8-byte header length, a JSON header, raw tensors
