@@ -1,6 +1,7 @@
 """The `iout-mj` command line, run as a user would."""
 
 import json
+import time
 
 import pytest
 from conftest import ROOT
@@ -114,3 +115,63 @@ def test_mission_accepts_any_k_with_the_fixed_layout(tmp_path):
     out = run("mission", "--nodes", "5", "--slots", "2", "--no-video", "--out", tmp_path)
     summary = json.loads(out.stdout)
     assert summary["n_nodes"] == 5 and len(summary["metrics"]["deliveries_per_node"]) == 5
+
+
+def test_flags_apply_only_when_given_and_conflicts_are_errors(tmp_path):
+    cfg = tmp_path / "scenario.yaml"
+    nodes = [[100, 100], [300, 600], [600, 300], [500, 800], [900, 100]]
+    cfg.write_text(json.dumps({"scenario": {"n_auvs": 3, "nodes_m": nodes}}))
+    out = run("mission", "--config", cfg, "--slots", "2", "--no-video", "--out", tmp_path)
+    summary = json.loads(out.stdout)
+    assert (summary["n_auvs"], summary["n_nodes"]) == (3, 5)  # the file's, not 2 and 7
+    bad = run("mission", "--config", cfg, "--nodes", "7", "--no-video", check=False)
+    assert bad.returncode == 2 and "--nodes 7 contradicts" in bad.stderr and "sets 5" in bad.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (("mission", "--seed", "-1"), "accepted an integer >= 0"),
+        (("evaluate", "--episodes", "0"), "accepted an integer >= 1"),
+        (("mission", "--width", "8"), "accepted an integer >= 16"),
+    ],
+)
+def test_bad_arguments_say_what_is_accepted(args, match):
+    out = run(*args, check=False)
+    assert out.returncode == 2 and match in out.stderr
+
+
+def test_unwritable_output_fails_before_the_work(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    for args in (
+        ("mission", "--no-video", "--out", blocker / "sub"),
+        ("evaluate", "--episodes", "1", "--out", blocker / "sub"),
+        ("validate-energy", "--out", blocker / "sub"),
+    ):
+        start = time.perf_counter()
+        out = run(*args, check=False)
+        assert out.returncode == 2 and "cannot write to" in out.stderr
+        assert time.perf_counter() - start < 20
+
+
+def test_a_diverged_mission_exits_non_zero_with_the_error_once(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("physics:\n  current_mps: [1.0e9, 0.0]\n")
+    out = run(
+        "mission", "--config", cfg, "--slots", "3", "--no-video", "--out", tmp_path, check=False
+    )
+    assert out.returncode == 3
+    assert out.stderr.count("physics diverged") == 1
+    summary = json.loads((tmp_path / "mission.json").read_text())
+    assert summary["metrics"]["valid"] is False
+
+
+def test_evaluate_skips_cells_a_policy_cannot_serve():
+    out = run(
+        *("evaluate", "--policy", "greedy", "ppo-n1-k7", "--n-auvs", "1", "--nodes", "3", "7"),
+        *("--episodes", "1", "--backend", "kinematic", "--json"),
+    )
+    cells = {(r["policy"], r["n_nodes"]) for r in json.loads(out.stdout)}
+    assert cells == {("greedy", 3), ("greedy", 7), ("ppo-n1-k7", 7)}
+    assert "skipped ppo-n1-k7 at N=1, K=3" in out.stderr

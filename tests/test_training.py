@@ -1,6 +1,7 @@
 """PPO end to end: a short run on both backends, save, reload, predict, resume, refusal."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -12,12 +13,15 @@ import torch
 import yaml
 from safetensors.torch import load_file
 
-from iout_mj.agents.policies import SHIPPED_DIR, load_policy
+from iout_mj.agents import policy_format
+from iout_mj.agents.policies import SHIPPED_DIR, load_policy, shipped_policies
+from iout_mj.agents.policy_format import read_manifest
 from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
 from iout_mj.mission.stats import episode_summary
 from iout_mj.schema import ConfigError
 from iout_mj.training import HELD_OUT_SEED, PhaseConfig, TrainConfig, train
+from iout_mj.training.checkpoints import CheckpointError
 
 pytestmark = pytest.mark.slow
 
@@ -144,8 +148,10 @@ def test_train_cli_rejects_bad_configs(tmp_path, cli):
 
 
 def test_shipped_policies_load_and_refuse_other_scenarios():
-    shipped = sorted(p.name for p in SHIPPED_DIR.iterdir() if (p / "model.zip").is_file())
-    assert "ppo-n1-k7" in shipped
+    shipped = shipped_policies()
+    assert "ppo-n1-k7" in shipped and all(
+        (SHIPPED_DIR / n / "policy.json").is_file() for n in shipped
+    )
     for name in shipped:
         n = int(name.split("-")[1][1:])
         env = gym.make(ENV_ID, backend="kinematic", n_auvs=n, n_nodes=7)
@@ -155,3 +161,34 @@ def test_shipped_policies_load_and_refuse_other_scenarios():
         other = gym.make(ENV_ID, backend="kinematic", n_auvs=n, n_nodes=13)
         with pytest.raises(ValueError, match="trained for"):
             load_policy(name, other)
+
+
+@pytest.mark.parametrize(("errno", "text"), [(28, "No space left"), (30, "Read-only")])
+def test_disk_faults_give_one_clear_error_and_keep_the_last_checkpoint(
+    tmp_path, monkeypatch, errno, text
+):
+    cfg = small(phases=(PhaseConfig("kinematic", 128), PhaseConfig("kinematic", 128)))
+    calls = {"n": 0}
+    real = policy_format.save_file
+
+    def failing(tensors, path):
+        calls["n"] += 1
+        if calls["n"] > 2:  # best/ and last/ of the first phase are written
+            raise OSError(errno, os.strerror(errno))
+        real(tensors, path)
+
+    monkeypatch.setattr(policy_format, "save_file", failing)
+    with pytest.raises(CheckpointError, match=f"cannot write checkpoint .*{text}"):
+        train(cfg, tmp_path, progress=False, parallel=False)
+    assert not any(p.name.endswith(".tmp") for p in tmp_path.iterdir())
+    kept = read_manifest(tmp_path / "last")  # complete, checksums verified
+    assert kept["run_state"]["phase"] == 1
+
+
+def test_a_kill_between_the_renames_is_recovered_and_state_json_is_not_needed(tmp_path):
+    cfg = small(phases=(PhaseConfig("kinematic", 128), PhaseConfig("kinematic", 128)))
+    train(cfg, tmp_path, progress=False, parallel=False)
+    (tmp_path / "last").rename(tmp_path / "last.tmp")  # killed before the final rename
+    (tmp_path / "state.json").write_text('{"phase": 1, "num_ti')  # and a torn copy
+    resumed = train(cfg, tmp_path, resume=True, progress=False, parallel=False)
+    assert resumed.num_timesteps == 256 and (tmp_path / "last" / "policy.json").is_file()
