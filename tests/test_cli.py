@@ -1,6 +1,8 @@
 """The `iout-mj` command line, run as a user would."""
 
 import json
+import re
+import shlex
 import time
 
 import pytest
@@ -175,3 +177,23 @@ def test_evaluate_skips_cells_a_policy_cannot_serve():
     cells = {(r["policy"], r["n_nodes"]) for r in json.loads(out.stdout)}
     assert cells == {("greedy", 3), ("greedy", 7), ("ppo-n1-k7", 7)}
     assert "skipped ppo-n1-k7 at N=1, K=3" in out.stderr
+
+
+def readme_commands():
+    """Every `iout-mj ...` example of the README (code blocks and the command table)."""
+    text = (ROOT / "README.md").read_text()
+    found = re.findall(r"`iout-mj ([^`]+)`", text)
+    found += re.findall(r"^\.venv/bin/iout-mj ([^#\n]+)", text, flags=re.M)
+    return [shlex.split(c) for c in found if "--help" not in c]
+
+
+def test_readme_examples_parse_and_the_cheap_ones_run(tmp_path):
+    from iout_mj.cli import build_parser
+
+    commands = readme_commands()
+    assert len(commands) >= 15
+    for argv in commands:
+        build_parser().parse_args(argv)  # exits (SystemExit) on any unknown flag or value
+    cheap = [c for c in commands if c[0] == "link-budget"]
+    for argv in cheap:
+        run(*argv)

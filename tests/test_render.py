@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from iout_mj.experiments.mission import run_mission
+from iout_mj.scenarios import make_config
 
 pytestmark = pytest.mark.slow
 
@@ -18,8 +19,7 @@ pytestmark = pytest.mark.slow
 def test_short_clip(tmp_path, backend):
     summary = run_mission(
         policy="planner",
-        n_auvs=2,
-        n_nodes=7,
+        config=make_config(2, 7),
         backend=backend,
         out=tmp_path,
         slots=3,

@@ -11,6 +11,8 @@ import cloudpickle
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -176,3 +178,33 @@ def test_policy_manifest_records_the_env_config():
     assert set(manifest["files"]) == {WEIGHTS, NORMALIZATION}
     raw = io.BytesIO((SHIPPED_DIR / "ppo-n2-k7" / WEIGHTS).read_bytes())
     assert raw.read(8)  # safetensors: an 8-byte header length, a JSON header, raw tensors
+
+
+@settings(
+    max_examples=40,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
+@given(
+    name=st.sampled_from([MANIFEST, WEIGHTS, NORMALIZATION]),
+    position=st.floats(0, 1, exclude_max=True),
+    byte=st.integers(0, 255),
+)
+def test_any_changed_byte_is_refused_or_harmless(tmp_path_factory, name, position, byte):
+    folder = tmp_path_factory.mktemp("p") / "policy"
+    shutil.copytree(SHIPPED_DIR / "ppo-n1-k7", folder)
+    data = bytearray((folder / name).read_bytes())
+    i = int(position * len(data))
+    changed = data[i] != byte
+    data[i] = byte
+    (folder / name).write_bytes(bytes(data))
+    env = gym.make(ENV_ID, backend="kinematic", n_auvs=1, n_nodes=7)
+    try:
+        loaded = read_trained(str(folder), env)
+    except PolicyError as exc:
+        assert str(folder) in str(exc)
+        return
+    # accepted: the byte was unchanged, or it sat in the manifest's free text (whitespace,
+    # a description) and left format, spaces and checksums intact
+    assert not changed or name == MANIFEST
+    assert loaded.manifest["observation_size"] == env.observation_space.shape[0]
