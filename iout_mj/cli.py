@@ -11,8 +11,8 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from iout_mj.agents.baselines import POLICIES
 from iout_mj.agents.policies import PolicyError, shipped_policies
+from iout_mj.agents.registry import POLICIES
 from iout_mj.cli_args import int_at_least, positive_distance
 from iout_mj.commands import (
     cmd_bench,

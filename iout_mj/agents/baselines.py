@@ -201,20 +201,3 @@ class Planner:
             chosen.add(int(data[i]))
         wet = np.where(go_dock, d.argmin(axis=1), safe_t)
         return _pack(h, s, wet, data)
-
-
-POLICIES: dict[str, type[Policy]] = {
-    "greedy": Greedy,
-    "round-robin": RoundRobin,
-    "random-walk": RandomWalk,
-    "planner": Planner,
-}
-
-
-def make_policy(name: str, seed: int | None = 0) -> Policy:
-    """A baseline by name."""
-    if name not in POLICIES:
-        raise ValueError(f"unknown policy {name!r}: accepted {sorted(POLICIES)} or a policy file")
-    policy: Policy = POLICIES[name]()
-    policy.reset(seed)
-    return policy

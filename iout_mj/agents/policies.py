@@ -17,7 +17,6 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3 import PPO
 
-from iout_mj.agents.baselines import POLICIES, make_policy
 from iout_mj.agents.policy_format import (
     MANIFEST,
     LoadedPolicy,
@@ -27,6 +26,7 @@ from iout_mj.agents.policy_format import (
     normalization_dict,
     save_policy,
 )
+from iout_mj.agents.registry import POLICIES, make_policy
 from iout_mj.config import Config
 from iout_mj.envs.gym_env import ENV_ID
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from iout_mj.agents.baselines import make_policy
+from iout_mj.agents.registry import make_policy
 from iout_mj.backends.kinematic import KinematicEnvironment
 from iout_mj.backends.mujoco.physics import AUVPhysics
 from iout_mj.config import Config
