@@ -11,8 +11,8 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from iout_mj.agents.policies import PolicyError, shipped_policies
 from iout_mj.agents.registry import POLICIES
+from iout_mj.agents.shipped import shipped_policies
 from iout_mj.cli_args import int_at_least, positive_distance
 from iout_mj.commands import (
     cmd_bench,
@@ -25,8 +25,8 @@ from iout_mj.commands import (
     cmd_validate_energy,
 )
 from iout_mj.envs import BACKENDS
+from iout_mj.errors import CheckpointError, PolicyError
 from iout_mj.schema import ConfigError
-from iout_mj.training.checkpoints import CheckpointError
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -119,7 +119,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--policy",
         nargs="+",
-        default=["greedy", "round-robin", "random-walk", "planner"],
+        default=["greedy", "round-robin", "random-walk", "planner", "comm-first", "tour-scheduler"],
         help=_policy_help() + "; cells a trained policy cannot serve are skipped",
     )
     p.add_argument("--n-auvs", type=int_at_least(1), nargs="+", default=[1, 2], help="AUVs N")

@@ -1,4 +1,8 @@
-"""The commands of `iout-mj`, one function each (the parser is in `cli`)."""
+"""The commands of `iout-mj`, one function each (the parser is in `cli`).
+
+Each command imports the layers it runs when it runs: torch and stable-baselines3 take about
+2 s to import, and `iout-mj link-budget` or `--help` should not wait for them.
+"""
 
 from __future__ import annotations
 
@@ -11,10 +15,7 @@ from typing import Any
 import numpy as np
 
 from iout_mj.cli_args import load_config, scenario_from_flags, writable_dir
-from iout_mj.experiments import bench, bench_report, energy_validation, evaluate, figures
-from iout_mj.experiments.mission import run_mission
 from iout_mj.scenarios import fixed_config
-from iout_mj.training import TrainConfig, train
 from iout_mj.world import acoustics
 
 DIVERGED = 3
@@ -62,6 +63,8 @@ def cmd_link_budget(args: argparse.Namespace) -> int:
 
 
 def cmd_validate_energy(args: argparse.Namespace) -> int:
+    from iout_mj.experiments import energy_validation  # heavy: see the module docstring
+
     cfg = fixed_config(1, 7, load_config(args.config))
     figure = writable_dir(Path(args.out)) / "energy_validation.png"
     print("validate-energy: steady state, manoeuvres, timestep test (about 5 s)", file=sys.stderr)
@@ -75,6 +78,8 @@ def cmd_validate_energy(args: argparse.Namespace) -> int:
 
 
 def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) -> dict[str, Any]:
+    from iout_mj.experiments.mission import run_mission  # heavy: see the module docstring
+
     cfg = scenario_from_flags(args.config, args.n_auvs, args.nodes)
     return run_mission(
         policy=args.policy,
@@ -115,6 +120,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    from iout_mj.experiments import evaluate  # heavy: see the module docstring
+
     out = writable_dir(Path(args.out)) if args.out else None
     skipped: list[str] = []
     rows, episodes = evaluate.evaluate(
@@ -142,6 +149,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_figures(args: argparse.Namespace) -> int:
+    from iout_mj.experiments import figures  # matplotlib: see the module docstring
+
     if not args.results and not args.runs:
         raise ValueError("figures: give --results DIR and/or --runs RUN [RUN ...]")
     out = writable_dir(Path(args.out or args.results or "renders"))
@@ -154,6 +163,8 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    from iout_mj.training import TrainConfig, train  # heavy: see the module docstring
+
     cfg = TrainConfig.load(args.config)
     out = writable_dir(Path(args.out or f"runs/{cfg.name}"))
     state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
@@ -167,6 +178,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    from iout_mj.experiments import bench, bench_report  # heavy: see the module docstring
+
     if args.out:
         writable_dir(Path(args.out).parent)
     if args.from_json:

@@ -43,17 +43,16 @@ def test_greedy_and_planner_dock_in_time(backend, name, n, k):
         assert metrics["mission_slots"] <= 55
 
 
-def test_planner_beats_random_walk_on_aoi():
+def quick_evaluation(policies, n_auvs):
+    """Three kinematic episodes per policy and N on the paper's 7 nodes, in this process."""
     rows, _ = evaluate(
-        ["planner", "random-walk"],
-        [1, 2],
-        [7],
-        episodes=3,
-        seed=0,
-        backend="kinematic",
-        workers=1,
-        progress=False,
+        policies, n_auvs, [7], episodes=3, seed=0, backend="kinematic", workers=1, progress=False
     )
+    return rows
+
+
+def test_planner_beats_random_walk_on_aoi():
+    rows = quick_evaluation(["planner", "random-walk"], [1, 2])
     aoi = {(r["policy"], r["n_auvs"]): r["mean_aoi"] for r in rows}
     for n in (1, 2):
         assert aoi[("planner", n)] < 0.8 * aoi[("random-walk", n)]
@@ -138,16 +137,7 @@ def test_schedule_names_distinct_affordable_nodes():
 
 @pytest.mark.parametrize("n", [1, 2])
 def test_tour_scheduler_beats_the_planner_and_docks(n):
-    rows, _ = evaluate(
-        ["planner", "tour-scheduler"],
-        [n],
-        [7],
-        episodes=3,
-        seed=0,
-        backend="kinematic",
-        workers=1,
-        progress=False,
-    )
+    rows = quick_evaluation(["planner", "tour-scheduler"], [n])
     by = {r["policy"]: r for r in rows}
     assert by["tour-scheduler"]["docking_rate"] == 1.0
     assert by["tour-scheduler"]["mean_aoi_horizon"] < by["planner"]["mean_aoi_horizon"] - 1.0

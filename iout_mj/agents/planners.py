@@ -69,13 +69,20 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
     n = mission.n_auvs
     req = acoustics.uplink_energy_j(pairwise_distance_m(positions_m, net.nodes_m), cfg.acoustics)
     can = net.energy_j[None, :] >= UPLINK_MARGIN * req  # (N, K)
-    # candidate assignments: a node per AUV, distinct, feasible (or a sure miss: -1)
-    options = [[int(x) for x in np.flatnonzero(can[i])] or [-1] for i in range(n)]
+    # candidate assignments: a node per AUV, distinct, affordable (or a sure miss: -1); each
+    # AUV's options are its best few by the greedy gain, so that at most ~MAX_CANDIDATES
+    gain = net.aoi / (k_reset - net.service_count)
+    per_auv = max(n, int(MAX_CANDIDATES ** (1 / n)))
+    options = []
+    for i in range(n):
+        nodes = np.flatnonzero(can[i])
+        best_first = nodes[np.argsort(-gain[nodes], kind="stable")][:per_auv]
+        options.append([int(x) for x in best_first] or [-1])
     combos = [
         c
         for c in itertools.product(*options)
         if len({x for x in c if x >= 0}) == sum(x >= 0 for x in c)
-    ][:MAX_CANDIDATES]
+    ] or [tuple(-1 for _ in range(n))]
     picks = np.array(combos, dtype=np.int64)  # (C, N)
     aoi = np.repeat(net.aoi[None], len(picks), axis=0)
     count = np.repeat(net.service_count[None], len(picks), axis=0)

@@ -27,22 +27,14 @@ from iout_mj.agents.policy_format import (
     save_policy,
 )
 from iout_mj.agents.registry import POLICIES, make_policy
+from iout_mj.agents.shipped import SHIPPED_DIR, shipped_policies
 from iout_mj.config import Config
 from iout_mj.envs.gym_env import ENV_ID
+from iout_mj.errors import PolicyError
 
-SHIPPED_DIR = Path(__file__).resolve().parent / "shipped"
 LEGACY_FILES = ("model.zip", "vecnormalize.pkl")
 ACTION_MAPPING = ("heading_levels", "speed_levels", "dtheta_max_deg", "dv_max_mps", "v_max_mps")
 """Motion settings that decide what an action index means: a policy needs the same."""
-
-
-class PolicyError(ValueError):
-    """A policy is unknown, unreadable, unsafe to load, or made for another scenario."""
-
-
-def shipped_policies() -> list[str]:
-    """Names of the policies shipped with the package."""
-    return sorted(p.name for p in SHIPPED_DIR.glob("*") if (p / MANIFEST).is_file())
 
 
 def resolve_policy_folder(name: str) -> Path:

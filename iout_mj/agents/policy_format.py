@@ -29,9 +29,10 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from iout_mj.agents.shipped import MANIFEST
+
 FORMAT = "iout-mj-policy"
 SCHEMA_VERSION = 1
-MANIFEST = "policy.json"
 WEIGHTS = "weights.safetensors"
 NORMALIZATION = "normalization.json"
 MAX_JSON_BYTES = 1 << 20

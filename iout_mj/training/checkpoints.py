@@ -30,11 +30,8 @@ from iout_mj.agents.policy_format import (
     save_policy,
     write_atomic,
 )
+from iout_mj.errors import CheckpointError
 from iout_mj.training.config import TrainConfig
-
-
-class CheckpointError(OSError):
-    """A checkpoint cannot be written or read; the message names the folder and the cause."""
 
 
 @dataclass
