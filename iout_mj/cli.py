@@ -26,7 +26,13 @@ from iout_mj.commands import (
 )
 from iout_mj.envs import BACKENDS
 from iout_mj.errors import CheckpointError, PolicyError
+from iout_mj.scenarios import LAYOUTS
 from iout_mj.schema import ConfigError
+
+LAYOUT_HELP = (
+    "paper: the paper's nodes for K = 7 and 13, one seeded layout per K otherwise; random: a new "
+    "layout every episode, drawn from the episode's seed"
+)
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -75,6 +81,7 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
     p.add_argument("--width", type=int_at_least(16), default=width, help="frame width, pixels")
     p.add_argument("--height", type=int_at_least(16), default=height, help="frame height, pixels")
     p.add_argument("--fps", type=int_at_least(1), default=30, help="video frames per second")
+    p.add_argument("--layout", choices=LAYOUTS, default="paper", help=LAYOUT_HELP)
     p.add_argument("--config", help="YAML/JSON env config (current, noise, reward, physics...)")
     _trust_pickle(p)
 
@@ -135,6 +142,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=BACKENDS, default="mujoco", help="how vehicles move")
     p.add_argument(
         "--workers", type=int_at_least(1), default=None, help="processes (default: one per core)"
+    )
+    p.add_argument("--layout", choices=LAYOUTS, default="paper", help=LAYOUT_HELP)
+    p.add_argument(
+        "--config",
+        help="YAML/JSON env config (current, noise, reward, physics); N and K come "
+        "from --n-auvs and --nodes",
     )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     p.add_argument("--out", help="folder for results.csv / results.json / traces.json")

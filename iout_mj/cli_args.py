@@ -60,9 +60,32 @@ def load_config(path: str | None) -> Config:
     return Config.load(path) if path else Config()
 
 
-def scenario_from_flags(config: str | None, n_auvs: int | None, n_nodes: int | None) -> Config:
+def evaluation_config(config: str | None) -> Config:
+    """The env config of an evaluation: N and K come from the flags, so a file that sets them
+    is refused rather than silently overridden."""
+    if config is None:
+        return Config()
+    scenario = load_mapping(config, "config file").get("scenario") or {}
+    fixed = sorted({"n_auvs", "nodes_m"} & set(scenario))
+    if fixed:
+        raise ConfigError(
+            f"{config} sets scenario {', '.join(fixed)}: evaluate takes N and K from --n-auvs "
+            "and --nodes (and the layout from --layout); remove them from the file"
+        )
+    return Config.load(config)
+
+
+def scenario_from_flags(
+    config: str | None, n_auvs: int | None, n_nodes: int | None, layout: str = "paper"
+) -> Config:
     """The mission's config: a flag applies only when given; a flag that contradicts what the
-    config file sets is an error naming both."""
+    config file sets is an error naming both. With layout "random" the nodes are drawn per
+    episode (the file's nodes_m is then refused)."""
+    if layout == "random":
+        base = evaluation_config(config)
+        n = 2 if n_auvs is None else n_auvs
+        k = base.scenario.n_nodes if n_nodes is None else n_nodes
+        return fixed_config(n, k, base)  # N and K; the env draws the nodes every episode
     if config is None:
         return fixed_config(2 if n_auvs is None else n_auvs, 7 if n_nodes is None else n_nodes)
     scenario = load_mapping(config, "config file").get("scenario") or {}

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from iout_mj.cli_args import load_config, scenario_from_flags, writable_dir
+from iout_mj.cli_args import evaluation_config, load_config, scenario_from_flags, writable_dir
 from iout_mj.scenarios import fixed_config
 from iout_mj.world import acoustics
 
@@ -80,10 +80,11 @@ def cmd_validate_energy(args: argparse.Namespace) -> int:
 def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) -> dict[str, Any]:
     from iout_mj.experiments.mission import run_mission  # heavy: see the module docstring
 
-    cfg = scenario_from_flags(args.config, args.n_auvs, args.nodes)
+    cfg = scenario_from_flags(args.config, args.n_auvs, args.nodes, args.layout)
     return run_mission(
         policy=args.policy,
         config=cfg,
+        layout=args.layout,
         backend=args.backend,
         seed=args.seed,
         out=writable_dir(out),
@@ -123,6 +124,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from iout_mj.experiments import evaluate  # heavy: see the module docstring
 
     out = writable_dir(Path(args.out)) if args.out else None
+    base = evaluation_config(args.config)
     skipped: list[str] = []
     rows, episodes = evaluate.evaluate(
         args.policy,
@@ -134,6 +136,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
         trust_pickle=args.trust_pickle,
         skipped=skipped,
+        layout=args.layout,
+        base=base,
     )
     for note in skipped:
         print(note, file=sys.stderr)

@@ -11,6 +11,7 @@ from iout_mj.agents.planners import schedule_uplinks
 from iout_mj.agents.policies import load_policy
 from iout_mj.agents.registry import POLICIES, make_policy
 from iout_mj.agents.rollout import run_episode
+from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
 from iout_mj.experiments.evaluate import evaluate
 from iout_mj.mission import Mission
@@ -141,3 +142,44 @@ def test_tour_scheduler_beats_the_planner_and_docks(n):
     by = {r["policy"]: r for r in rows}
     assert by["tour-scheduler"]["docking_rate"] == 1.0
     assert by["tour-scheduler"]["mean_aoi_horizon"] < by["planner"]["mean_aoi_horizon"] - 1.0
+
+
+def test_random_layouts_are_the_same_for_every_policy_and_differ_by_episode(tmp_path):
+    from iout_mj.experiments.evaluate import scenario_env
+
+    layouts = []
+    for _ in range(2):  # two policies' envs, episode seeds 5 and 6
+        env = scenario_env(2, 9, "kinematic", "random", Config())
+        layouts.append(
+            [env.reset(seed=s) and env.unwrapped.mission.network.nodes_m.copy() for s in (5, 6)]
+        )
+    np.testing.assert_array_equal(layouts[0][0], layouts[1][0])
+    assert not np.array_equal(layouts[0][0], layouts[0][1])
+    rows, _ = evaluate(
+        ["greedy"], [1], [9], 2, 0, "kinematic", workers=1, progress=False, layout="random"
+    )
+    assert rows[0]["layout"] == "random" and {"docking_rate", "mean_aoi_horizon"} <= set(rows[0])
+
+
+def test_evaluate_takes_any_env_config(tmp_path, cli):
+    wenz = tmp_path / "wenz.yaml"
+    wenz.write_text("acoustics:\n  noise_model: wenz\n")
+    args = (
+        "evaluate",
+        "--policy",
+        "greedy",
+        "--n-auvs",
+        "1",
+        "--episodes",
+        "2",
+        "--backend",
+        "kinematic",
+        "--json",
+    )
+    flat = json.loads(cli(*args).stdout)[0]
+    quiet = json.loads(cli(*args, "--config", wenz).stdout)[0]
+    assert quiet["delivered_bits"] > flat["delivered_bits"]  # 19 dB less noise: more uplinks
+    nodes = tmp_path / "nodes.yaml"
+    nodes.write_text("scenario:\n  nodes_m: [[100, 100], [900, 900]]\n")
+    bad = cli(*args, "--config", nodes, check=False)
+    assert bad.returncode == 2 and "takes N and K from --n-auvs" in bad.stderr

@@ -17,6 +17,7 @@ from iout_mj.agents import policy_format
 from iout_mj.agents.policies import SHIPPED_DIR, load_policy, shipped_policies
 from iout_mj.agents.policy_format import read_manifest
 from iout_mj.agents.rollout import run_episode
+from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
 from iout_mj.mission.stats import episode_summary
 from iout_mj.schema import ConfigError
@@ -192,3 +193,12 @@ def test_a_kill_between_the_renames_is_recovered_and_state_json_is_not_needed(tm
     (tmp_path / "state.json").write_text('{"phase": 1, "num_ti')  # and a torn copy
     resumed = train(cfg, tmp_path, resume=True, progress=False, parallel=False)
     assert resumed.num_timesteps == 256 and (tmp_path / "last" / "policy.json").is_file()
+
+
+def test_the_training_config_carries_the_env_config(tmp_path):
+    env = Config.from_dict({"acoustics": {"noise_model": "wenz"}})
+    cfg = small(phases=(PhaseConfig("kinematic", 64),), env=env)
+    train(cfg, tmp_path, progress=False, parallel=False)
+    manifest = read_manifest(tmp_path / "last")
+    assert manifest["env_config"]["acoustics"]["noise_model"] == "wenz"
+    assert TrainConfig.load(tmp_path / "config.yaml") == cfg  # the env config round-trips

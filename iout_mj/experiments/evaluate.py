@@ -11,6 +11,7 @@ import csv
 import json
 import multiprocessing as mp
 import os
+from dataclasses import dataclass
 from itertools import product
 from pathlib import Path
 from typing import Any
@@ -21,49 +22,78 @@ from tqdm import tqdm
 
 from iout_mj.agents.policies import PolicyError, load_policy
 from iout_mj.agents.rollout import run_episode
+from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
 from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
-from iout_mj.scenarios import fixed_config
+from iout_mj.scenarios import LAYOUTS, fixed_config
+from iout_mj.schema import ConfigError
 
 TRACE_NODES = 7
 
 
-Job = tuple[str, int, int, int, str, bool, bool]
-"""(policy, N, K, seed, backend, keep the trace, trust pickle)."""
+@dataclass(frozen=True)
+class Job:
+    """One episode of an evaluation (picklable: it crosses into a worker process)."""
+
+    policy: str
+    n_auvs: int
+    n_nodes: int
+    seed: int
+    backend: str
+    layout: str
+    base: Config
+    keep_trace: bool = False
+    trust_pickle: bool = False
+
+
+def scenario_env(n_auvs: int, n_nodes: int, backend: str, layout: str, base: Config) -> Any:
+    """The env of one evaluation cell: "paper" is the paper's layout for K = 7 and 13 and one
+    seeded layout per K otherwise (`fixed_config`); "random" draws a new layout every episode
+    from the task RNG, so `reset(seed=S + e)` gives every policy the same layouts."""
+    if layout == "random":
+        return gym.make(
+            ENV_ID, backend=backend, n_auvs=n_auvs, n_nodes=n_nodes, layout="random", config=base
+        )
+    return gym.make(ENV_ID, backend=backend, config=fixed_config(n_auvs, n_nodes, base))
 
 
 def _episode(job: Job) -> dict[str, Any]:
-    policy_name, n_auvs, n_nodes, seed, backend, keep_trace, trust_pickle = job
-    env = gym.make(ENV_ID, backend=backend, config=fixed_config(n_auvs, n_nodes))
-    policy = load_policy(policy_name, env, seed, trust_pickle)
-    metrics = run_episode(env, policy, seed)
+    env = scenario_env(job.n_auvs, job.n_nodes, job.backend, job.layout, job.base)
+    policy = load_policy(job.policy, env, job.seed, job.trust_pickle)
+    metrics = run_episode(env, policy, job.seed)
     row: dict[str, Any] = {
-        "policy": policy_name,
-        "n_auvs": n_auvs,
-        "n_nodes": n_nodes,
-        "seed": seed,
-        "backend": backend,
+        "policy": job.policy,
+        "n_auvs": job.n_auvs,
+        "n_nodes": job.n_nodes,
+        "layout": job.layout,
+        "seed": job.seed,
+        "backend": job.backend,
         **metrics,
     }
-    if keep_trace:
-        row["trace"] = env.unwrapped.mission.trace()  # type: ignore[attr-defined]
+    if job.keep_trace:
+        row["trace"] = env.unwrapped.mission.trace()
     env.close()
     return row
 
 
 def _cells(
-    policies: list[str], n_auvs: list[int], nodes: list[int], trust_pickle: bool
+    policies: list[str],
+    n_auvs: list[int],
+    nodes: list[int],
+    layout: str,
+    base: Config,
+    trust_pickle: bool,
 ) -> tuple[list[tuple[str, int, int]], list[str]]:
     """The (policy, N, K) cells a policy can serve, and why the others are skipped. An
     unknown or unreadable policy fails here, before any worker starts."""
     cells, skipped = [], []
     for name, n, k in product(policies, n_auvs, nodes):
-        env = gym.make(ENV_ID, backend="kinematic", config=fixed_config(n, k))
+        env = scenario_env(n, k, "kinematic", layout, base)
         try:
             load_policy(name, env, trust_pickle=trust_pickle)
             cells.append((name, n, k))
         except PolicyError as exc:
-            if "trained for" not in str(exc):
+            if "trained" not in str(exc):
                 raise
             skipped.append(f"skipped {name} at N={n}, K={k}: {exc}")
         finally:
@@ -72,17 +102,19 @@ def _cells(
 
 
 def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Mean and standard deviation per (policy, N, K, backend)."""
+    """Mean and standard deviation per (policy, N, K, layout, backend)."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for e in episodes:
-        groups.setdefault((e["policy"], e["n_auvs"], e["n_nodes"], e["backend"]), []).append(e)
+        cell = (e["policy"], e["n_auvs"], e["n_nodes"], e["layout"], e["backend"])
+        groups.setdefault(cell, []).append(e)
     rows = []
-    for (policy, n, k, backend), eps in sorted(groups.items()):
+    for (policy, n, k, layout, backend), eps in sorted(groups.items()):
         summaries = [episode_summary(e) for e in eps]
         row: dict[str, Any] = {
             "policy": policy,
             "n_auvs": n,
             "n_nodes": k,
+            "layout": layout,
             "backend": backend,
             "episodes": len(eps),
         }
@@ -105,19 +137,25 @@ def evaluate(
     progress: bool = True,
     trust_pickle: bool = False,
     skipped: list[str] | None = None,
+    layout: str = "paper",
+    base: Config | None = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run every (policy, N, K, episode) a policy can serve; returns (summary rows, episode
-    rows). Cells a trained policy cannot serve (another N or K) are skipped and said in
-    `skipped`."""
+    rows). `layout` and `base` (the env config: current, noise, reward, physics; its N and K
+    come from the arguments) are as for `scenario_env`. Cells a trained policy cannot serve
+    (another N, K or action mapping) are skipped and said in `skipped`."""
     if episodes < 1:
         raise ValueError(f"episodes={episodes}: accepted an integer >= 1")
-    cells, notes = _cells(policies, n_auvs, nodes, trust_pickle)
+    if layout not in LAYOUTS:
+        raise ConfigError(f"layout={layout!r} is invalid: accepted one of {LAYOUTS}")
+    base = base or Config()
+    cells, notes = _cells(policies, n_auvs, nodes, layout, base, trust_pickle)
     if skipped is not None:
         skipped.extend(notes)
     if not cells:
         raise PolicyError("no policy can serve any of the asked (N, K): " + "; ".join(notes))
-    jobs: list[Job] = [
-        (p, n, k, seed + e, backend, e == 0 and k == TRACE_NODES, trust_pickle)
+    jobs = [
+        Job(p, n, k, seed + e, backend, layout, base, e == 0 and k == TRACE_NODES, trust_pickle)
         for (p, n, k), e in product(cells, range(episodes))
     ]
     workers = workers or min(len(jobs), os.cpu_count() or 1)

@@ -41,11 +41,13 @@ def run_mission(
     slots: int | None = None,
     name: str = "mission",
     trust_pickle: bool = False,
+    layout: str = "paper",
 ) -> dict[str, Any]:
     """Fly one mission and write `<name>.json`, `<name>_trajectory.png`, and (with `video`)
     `<name>.mp4` plus its last frame `<name>.png` into `out`. `config` is used as it is (the
     paper's defaults for None: N = 2, K = 7). A mission whose physics diverged has
-    `metrics["valid"] = False` and the error in `metrics["error"]`."""
+    `metrics["valid"] = False` and the error in `metrics["error"]`. With `layout="random"` the
+    nodes are drawn from the episode's seed."""
     cfg = load_config(config)
     n_auvs, n_nodes = cfg.scenario.n_auvs, cfg.scenario.n_nodes
     if slots is not None:
@@ -57,6 +59,7 @@ def run_mission(
         ENV_ID,
         backend=backend,
         config=cfg,
+        layout=layout,
         render_mode="rgb_array_list" if video else None,
         width=width,
         height=height,

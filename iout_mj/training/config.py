@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import re
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from iout_mj.config import MAX_AUVS, MAX_NODES, MIN_NODES
+from iout_mj.config import MAX_AUVS, MAX_NODES, MIN_NODES, Config
 from iout_mj.paper import PAPER_LAYOUTS
 from iout_mj.scenarios import LAYOUTS
 from iout_mj.schema import (
@@ -45,6 +45,9 @@ class TrainConfig:
     n_auvs: int = 2
     n_nodes: int = 7
     layout: str = "paper"
+    env: Config = field(default_factory=Config)
+    """The env config trained on (current, noise, reward, physics...); its N, K and layout
+    are the three fields above."""
     phases: tuple[PhaseConfig, ...] = (PhaseConfig(),)
     n_envs: int = 8
     n_steps: int = 512
@@ -118,4 +121,5 @@ class TrainConfig:
         d = asdict(self)
         d["phases"] = [dict(p) for p in d["phases"]]
         d["net_arch"] = list(self.net_arch)
+        d["env"] = self.env.to_dict()
         return d

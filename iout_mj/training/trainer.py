@@ -40,7 +40,12 @@ HELD_OUT_SEED = 1_000_000
 def scenario_env(cfg: TrainConfig, backend: str) -> Any:
     """The gymnasium env of the config's scenario."""
     return gym.make(
-        ENV_ID, n_auvs=cfg.n_auvs, n_nodes=cfg.n_nodes, backend=backend, layout=cfg.layout
+        ENV_ID,
+        n_auvs=cfg.n_auvs,
+        n_nodes=cfg.n_nodes,
+        backend=backend,
+        layout=cfg.layout,
+        config=cfg.env,
     )
 
 
@@ -54,7 +59,7 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
 def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bool) -> Any:
     """The training VecEnv: one batch of `n_envs` environments in this process, for either
     backend; with `parallel`, the MuJoCo rollout runs on one C thread per core."""
-    args = (n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout)
+    args = (n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout, cfg.env)
     if backend == "kinematic":
         return VecMonitor(KinematicVecEnv(*args, seed=seed))
     threads = min(n_envs, os.cpu_count() or 1) if parallel else 0
