@@ -41,7 +41,11 @@ def _choose_gl_backend() -> None:
 
 def _register() -> None:
     if "iout_mj/MultiAUV-v0" not in gymnasium.registry:
-        gymnasium.register(id="iout_mj/MultiAUV-v0", entry_point="iout_mj.envs.gym_env:MultiAUVEnv")
+        gymnasium.register(
+            id="iout_mj/MultiAUV-v0",
+            entry_point="iout_mj.envs.gym_env:MultiAUVEnv",
+            vector_entry_point="iout_mj.envs.gym_vector:MultiAUVVectorEnv",
+        )
 
 
 _choose_gl_backend()

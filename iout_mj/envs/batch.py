@@ -1,0 +1,86 @@
+"""B environments of either backend stepped together: the one batched core that the SB3 VecEnvs
+and the gymnasium VectorEnv adapt (no stable-baselines3, no gymnasium here).
+
+- kinematic: the paper's kinematics on the whole batch (`backends.kinematic.move`), one core;
+- mujoco: B MuJoCo scenes stepped by one `mujoco.rollout` call, whose C threads (`nthread`)
+  share the slot's substeps between cores: no worker processes, no pickling.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from iout_mj.backends.kinematic import move
+from iout_mj.backends.mujoco.physics import AUVPhysics, Stepper
+from iout_mj.backends.mujoco.task import book, command, start_episode, substeps_per_slot
+from iout_mj.mission import Mission
+from iout_mj.scenarios import ConfigLike, resolve_config
+from iout_mj.types import BoolArray, FloatArray
+
+BACKENDS = ("mujoco", "kinematic")
+
+
+class MissionBatch:
+    """A batched Mission and the vehicles it moves.
+
+    Args:
+        n_envs: B, the number of environments.
+        backend: "kinematic" or "mujoco".
+        n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
+        seed: seeds the one RNG of the batch.
+        nthread: C threads of the MuJoCo rollout (0: the calling thread).
+    """
+
+    def __init__(
+        self,
+        n_envs: int,
+        backend: str = "kinematic",
+        n_auvs: int | None = None,
+        n_nodes: int | None = None,
+        layout: str = "paper",
+        config: ConfigLike = None,
+        seed: int | None = None,
+        nthread: int = 0,
+    ):
+        if not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
+            raise ValueError(f"n_envs={n_envs!r} is invalid: accepted an integer >= 1")
+        if backend not in BACKENDS:
+            raise ValueError(f"backend={backend!r} is invalid: accepted one of {BACKENDS}")
+        if not isinstance(nthread, (int, np.integer)) or nthread < 0:
+            raise ValueError(f"nthread={nthread!r} is invalid: accepted an integer >= 0")
+        self.n_envs, self.backend = int(n_envs), backend
+        self.cfg = resolve_config(config, n_auvs, n_nodes, layout)
+        self.mission = Mission(self.cfg, layout == "random", n_envs=self.n_envs)
+        self.random = np.random.RandomState(seed)
+        self.physics: list[AUVPhysics] = []
+        self.stepper: Stepper | None = None
+        if backend == "mujoco":
+            self.physics = [AUVPhysics.from_config(self.cfg) for _ in range(self.n_envs)]
+            self.substeps = substeps_per_slot(self.cfg, self.physics[0].dt_s)
+            self.stepper = Stepper(nthread)
+        self._none_failed = np.zeros(self.n_envs, dtype=bool)
+
+    def restart(self, mask: BoolArray | None = None) -> None:
+        """Start new episodes where `mask` (everywhere for None), drawing from the batch RNG."""
+        self.mission.reset(self.random, mask)
+        rows = range(self.n_envs) if mask is None else np.flatnonzero(mask)
+        for e in rows if self.physics else ():
+            start_episode(self.mission, self.physics[e], int(e))
+
+    def move(self, actions: Any) -> tuple[FloatArray, BoolArray]:
+        """One slot for every environment: rewards, and which envs failed (physics diverged)."""
+        if self.stepper is None:
+            return move(self.mission, actions), self._none_failed
+        meters = command(self.mission, self.physics, actions)
+        failed = self.stepper.step(self.physics, self.substeps)
+        return book(self.mission, self.physics, meters), failed
+
+    def close(self) -> None:
+        if self.stepper is not None:
+            self.stepper.close()
+            self.stepper = None
+        for p in self.physics:
+            p.free()
+        self.physics = []

@@ -1,0 +1,109 @@
+"""The gymnasium vector API over the batched core: `gym.make_vec("iout_mj/MultiAUV-v0",
+num_envs=B, vectorization_mode="vector_entry_point", backend=...)`.
+
+One `step` moves all B environments (`envs.batch.MissionBatch`), as the SB3 VecEnvs do.
+Autoreset is gymnasium's same-step mode (`metadata["autoreset_mode"]`): an environment that
+ends is reset in the same step, the returned observation is its new episode's first, and
+`info["final_obs"]` / `info["final_info"]` (masked by `info["_final_obs"]`) hold the end of
+the old one, `final_info` with the episode's `metrics`. Every step's `info["reward_terms"]`
+holds each reward term for every environment.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from iout_mj.envs.batch import MissionBatch
+from iout_mj.envs.gym_env import spaces
+from iout_mj.scenarios import ConfigLike
+
+
+class MultiAUVVectorEnv(VectorEnv):
+    """B multi-AUV environments in one batch; the spaces of `iout_mj/MultiAUV-v0`, batched.
+
+    Args:
+        num_envs: B.
+        n_auvs, n_nodes, backend, layout, config: as for `gymnasium.make`.
+        nthread: C threads of the MuJoCo rollout (0: the calling thread).
+        render_mode: None (rendering is per env: use `gymnasium.make`).
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}  # noqa: RUF012
+
+    def __init__(
+        self,
+        num_envs: int,
+        n_auvs: int | None = None,
+        n_nodes: int | None = None,
+        backend: str = "kinematic",
+        layout: str = "paper",
+        config: ConfigLike = None,
+        nthread: int = 0,
+        render_mode: str | None = None,
+    ):
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode={render_mode!r}: the vector env does not render; accepted None"
+            )
+        self.batch = MissionBatch(num_envs, backend, n_auvs, n_nodes, layout, config, None, nthread)
+        self.mission = self.batch.mission
+        self.num_envs = self.batch.n_envs
+        self.single_observation_space, self.single_action_space = spaces(self.mission)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.render_mode = None
+        self._needs_reset = True
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start every environment; `seed` (an int) seeds the batch's one RNG."""
+        if isinstance(seed, list):
+            raise ValueError(
+                "seed: accepted one integer for the whole batch (it draws every environment's "
+                "episode from one RNG), or None"
+            )
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+                raise ValueError(f"seed={seed!r} is invalid: accepted an integer >= 0 or None")
+            self.batch.random = np.random.RandomState(seed)
+        self.batch.restart(None)
+        self._needs_reset = False
+        return self.mission.flat_observation(), {}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if self._needs_reset:
+            raise RuntimeError("step() before reset(): call reset() first")
+        m = self.mission
+        rewards, failed = self.batch.move(actions)
+        obs = m.flat_observation()
+        terminated = m.state.terminated | failed
+        truncated = m.state.truncated & ~failed
+        rewards = np.where(failed, 0.0, rewards)
+        infos: dict[str, Any] = {
+            "reward_terms": {
+                k: np.broadcast_to(v, (self.num_envs,)).astype(float) for k, v in m.terms.items()
+            },
+            "_reward_terms": np.ones(self.num_envs, dtype=bool),
+        }
+        done = terminated | truncated
+        if done.any():
+            for e in np.flatnonzero(done):
+                final: dict[str, Any] = {"metrics": m.metrics(int(e))}
+                if failed[e]:
+                    final["error"] = "physics diverged (MuJoCo reset the state)"
+                infos = self._add_info(
+                    infos, {"final_obs": obs[e].copy(), "final_info": final}, int(e)
+                )
+            self.batch.restart(done)
+            obs[done] = m.flat_observation()[done]
+        return obs, rewards, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self.batch.close()
