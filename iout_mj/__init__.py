@@ -2,6 +2,7 @@
 
 import os
 from ctypes.util import find_library
+from typing import Any
 
 import gymnasium  # does not import mujoco: the GL backend is still free to choose
 
@@ -46,6 +47,13 @@ def _register() -> None:
             entry_point="iout_mj.envs.gym_env:MultiAUVEnv",
             vector_entry_point="iout_mj.envs.gym_vector:MultiAUVVectorEnv",
         )
+
+
+def parallel_env(**kwargs: Any) -> Any:
+    """The PettingZoo ParallelEnv, one agent per AUV (`envs.parallel_env`)."""
+    from iout_mj.envs.parallel_env import parallel_env as make  # pettingzoo: only when asked
+
+    return make(**kwargs)
 
 
 _choose_gl_backend()

@@ -1,0 +1,144 @@
+"""PettingZoo: the mission as a `ParallelEnv`, one agent per AUV (`auv_0`, `auv_1`, ...).
+
+Each agent observes its own state, the nodes as it sees them and the other AUVs relative to
+itself, and chooses its own (heading, speed, AET node, uplink node). The reward is the
+paper's team reward, the same for every agent; `infos[agent]` holds the team's reward terms
+and the agent's own state. `state()` is the global observation of `iout_mj/MultiAUV-v0` (for
+a centralised critic). All agents end together: when every AUV docked, a battery is empty,
+or at T_max.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from pettingzoo import ParallelEnv
+
+from iout_mj.envs.gym_env import MultiAUVEnv
+from iout_mj.mission import OBS_HIGH, OBS_LOW, Mission
+from iout_mj.mission.observation import node_energy_level
+from iout_mj.scenarios import ConfigLike
+from iout_mj.world.geometry import unit_xy
+
+
+def agent_observation_size(n_auvs: int, n_nodes: int) -> int:
+    """own position 2, heading 2, speed 1, docked 1, dock distance 1; per node AoI, energy,
+    distance (3K); per other AUV relative position 2 and docked 1; time remaining 1."""
+    return 7 + 3 * n_nodes + 3 * (n_auvs - 1) + 1
+
+
+def agent_observations(m: Mission) -> np.ndarray:
+    """(N, D) float32: every agent's observation (see `agent_observation_size`)."""
+    s, net, cfg = m.state, m.network, m.cfg
+    n = m.n_auvs
+    own = np.concatenate(
+        [
+            s.positions_m * m.inv_area,
+            unit_xy(s.headings_rad),
+            (s.speeds_mps / cfg.motion.v_max_mps)[:, None],
+            s.docked[:, None].astype(float),
+            (s.dock_dist_m * m.inv_diag)[:, None],
+        ],
+        axis=1,
+    )
+    nodes = np.concatenate(
+        [
+            np.broadcast_to(net.aoi / cfg.network.aoi_max, (n, m.n_nodes)),
+            np.broadcast_to(node_energy_level(net.energy_j), (n, m.n_nodes)),
+            s.distance_m * m.inv_diag,
+        ],
+        axis=1,
+    )
+    others = []
+    for i in range(n):
+        rest = [j for j in range(n) if j != i]
+        rel = (s.positions_m[rest] - s.positions_m[i]) * m.inv_area
+        others.append(np.concatenate([rel.ravel(), s.docked[rest].astype(float)]))
+    time_left = np.full((n, 1), 1 - s.slot / cfg.scenario.horizon_slots)
+    return np.concatenate([own, nodes, np.array(others).reshape(n, -1), time_left], axis=1).astype(
+        np.float32
+    )
+
+
+class MultiAUVParallelEnv(ParallelEnv):
+    """N AUVs as N agents of one team; arguments as for `gymnasium.make("iout_mj/MultiAUV-v0")`."""
+
+    metadata = {"name": "iout_mj_multi_auv_v0", "render_modes": []}  # noqa: RUF012
+
+    def __init__(
+        self,
+        n_auvs: int | None = 2,
+        n_nodes: int | None = 7,
+        backend: str = "kinematic",
+        layout: str = "paper",
+        config: ConfigLike = None,
+    ):
+        self.env = MultiAUVEnv(n_auvs, n_nodes, backend, layout, None, config)
+        self.mission = self.env.mission
+        n, k = self.mission.n_auvs, self.mission.n_nodes
+        self.possible_agents = [f"auv_{i}" for i in range(n)]
+        self.agents: list[str] = []
+        size = agent_observation_size(n, k)
+        self._obs_space = gym.spaces.Box(OBS_LOW, OBS_HIGH, shape=(size,), dtype=np.float32)
+        cfg = self.mission.cfg.motion
+        self._act_space = gym.spaces.MultiDiscrete([cfg.heading_levels, cfg.speed_levels, k, k])
+        self.state_space = self.env.observation_space
+        self.render_mode = None
+
+    def observation_space(self, agent: str) -> gym.spaces.Box:
+        return self._obs_space
+
+    def action_space(self, agent: str) -> gym.spaces.MultiDiscrete:
+        return self._act_space
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        obs = agent_observations(self.mission)
+        return {a: obs[i] for i, a in enumerate(self.possible_agents)}
+
+    def _infos(self, team: dict[str, Any]) -> dict[str, dict[str, Any]]:
+        s = self.mission.state
+        return {
+            a: {
+                **team,
+                "docked": bool(s.docked[i]),
+                "propulsion_energy_j": float(s.propulsion_energy_j[i]),
+            }
+            for i, a in enumerate(self.possible_agents)
+        }
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
+        self.env.reset(seed=seed)
+        self.agents = list(self.possible_agents)
+        return self._observe(), self._infos({})
+
+    def step(self, actions: dict[str, Any]) -> tuple[Any, Any, Any, Any, Any]:
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"actions: missing for {missing}; accepted one action per agent")
+        joint = np.concatenate([np.asarray(actions[a]).ravel() for a in self.possible_agents])
+        _, reward, terminated, truncated, info = self.env.step(joint)
+        agents = self.agents
+        obs = self._observe()
+        infos = self._infos(info)
+        rewards = dict.fromkeys(agents, float(reward))
+        terminations = dict.fromkeys(agents, bool(terminated))
+        truncations = dict.fromkeys(agents, bool(truncated))
+        if terminated or truncated:
+            self.agents = []
+        return obs, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        """The global observation (the centralised critic's input)."""
+        return self.mission.flat_observation()
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def parallel_env(**kwargs: Any) -> MultiAUVParallelEnv:
+    """The PettingZoo parallel env: `iout_mj.parallel_env(n_auvs=2, n_nodes=7, ...)`."""
+    return MultiAUVParallelEnv(**kwargs)
