@@ -59,6 +59,11 @@ def test_validate_energy_json(tmp_path):
         "slowdown",
         "mission",
     }
+    by_name = {m["name"]: m for m in result["maneuvers"]}
+    assert not by_name["90 deg turn at 2 m/s"]["commandable"]  # a 90 deg setpoint jump
+    assert by_name["turn 25 deg per slot to 90"]["commandable"]
+    for m in result["maneuvers"]:  # the arc flown is never shorter than the chord
+        assert m["model_path_energy_j"] >= m["model_energy_j"] - 1e-6
     assert result["timestep"]["rel_change_quarter_dt"] < 0.01
     assert (tmp_path / "energy_validation.png").stat().st_size > 10_000
 

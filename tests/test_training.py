@@ -11,6 +11,7 @@ import gymnasium as gym
 import pytest
 import torch
 import yaml
+from conftest import ROOT
 from safetensors.torch import load_file
 
 from iout_mj.agents import policy_format
@@ -202,3 +203,20 @@ def test_the_training_config_carries_the_env_config(tmp_path):
     manifest = read_manifest(tmp_path / "last")
     assert manifest["env_config"]["acoustics"]["noise_model"] == "wenz"
     assert TrainConfig.load(tmp_path / "config.yaml") == cfg  # the env config round-trips
+
+
+def test_rl_zoo3_trains_with_the_shipped_hyperparameters(tmp_path):
+    """rl-zoo3 finds the env through --gym-packages and the project's hyperparameter file."""
+    out = subprocess.run(
+        [
+            *(sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo"),
+            *("--env", "iout_mj/MultiAUV-v0", "--gym-packages", "iout_mj"),
+            *("-conf", str(ROOT / "training" / "configs" / "rl-zoo3-ppo.yml")),
+            *("-n", "4096", "--eval-freq", "-1", "--log-folder", str(tmp_path)),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert list(tmp_path.glob("ppo/iout_mj-MultiAUV-v0_1/*.zip"))

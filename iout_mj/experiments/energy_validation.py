@@ -66,12 +66,27 @@ def _mission_maneuver() -> Maneuver:
     )
 
 
+def commandable(man: Maneuver, cfg: Config) -> bool:
+    """Whether an agent can command the manoeuvre: per slot at most dtheta_max of heading and
+    dv_max of speed setpoint change (25 deg, 0.4 m/s)."""
+    m = cfg.motion
+    heading = np.diff([man.start_heading_deg, *man.heading_deg])
+    speed = np.diff([man.start_speed_mps, *man.speed_mps])
+    return bool(
+        np.all(np.abs(heading) <= m.dtheta_max_deg + 1e-9)
+        and np.all(np.abs(speed) <= m.dv_max_mps + 1e-9)
+    )
+
+
 def maneuvers() -> list[Maneuver]:
     zigzag = tuple(25.0 * (i % 2) for i in range(8))
     slowdown = tuple(max(3.0 - 0.4 * i, 0.0) for i in range(9))
+    ramp = tuple(round(0.4 * (i + 1), 1) for i in range(10))
     return [
         Maneuver("accelerate 0 to 4 m/s", 0.0, (0.0,) * 3, (4.0,) * 3),
+        Maneuver("accelerate 0.4 m/s per slot", 0.0, (0.0,) * len(ramp), ramp),
         Maneuver("90 deg turn at 2 m/s", 2.0, (90.0, 90.0), (2.0, 2.0)),
+        Maneuver("turn 25 deg per slot to 90", 2.0, (25.0, 50.0, 75.0, 90.0, 90.0), (2.0,) * 5),
         Maneuver("zig-zag +-25 deg at 2 m/s", 2.0, zigzag, (2.0,) * len(zigzag)),
         Maneuver("slowdown 3 m/s to dock", 3.0, (0.0,) * len(slowdown), slowdown),
         _mission_maneuver(),
@@ -121,24 +136,28 @@ def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
         np.radians([man.start_heading_deg]),
         np.array([man.start_speed_mps]),
     )
-    measured, model, distance, ends = [], [], [], []
-    for heading_deg, speed in zip(man.heading_deg, man.speed_mps, strict=False):
+    measured, model, model_path, distance, ends = [], [], [], [], []
+    for heading_deg, speed in zip(man.heading_deg, man.speed_mps, strict=True):
         start = physics.positions_m()[0]
         before = physics.mech_energy_j.sum()
         physics.set_commands(np.radians([heading_deg]), np.array([speed]))
         physics.step(nstep)
         end = physics.positions_m()[0]
         d = float(np.linalg.norm(end - start))
+        path = np.vstack([start, physics.substep_positions_m()[:, 0]])
+        flown = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
         work_j = physics.mech_energy_j.sum() - before
         e = propulsion.electrical_energy_j(work_j, m) + propulsion.hotel_energy_j(slot_s, m)
         measured.append(float(e))
         model.append(float(propulsion.slot_energy_j(speed, d, slot_s, m)))
+        model_path.append(float(propulsion.slot_energy_j(speed, flown, slot_s, m)))
         distance.append(d)
         ends.append(end.copy())
     physics.free()
     return {
         "measured_j": np.array(measured),
         "model_j": np.array(model),
+        "model_path_j": np.array(model_path),
         "distance_m": np.array(distance),
         "end_m": np.array(ends),
     }
@@ -166,13 +185,17 @@ def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str,
     for man in mans:
         r = run_maneuver(cfg, man, cfg.physics.timestep_s)
         meas, mod = float(r["measured_j"].sum()), float(r["model_j"].sum())
+        mod_path = float(r["model_path_j"].sum())
         man_rows.append(
             {
                 "name": man.name,
+                "commandable": commandable(man, cfg),
                 "slots": len(man.speed_mps),
                 "measured_energy_j": meas,
                 "model_energy_j": mod,
                 "rel_error": (meas - mod) / mod,
+                "model_path_energy_j": mod_path,
+                "rel_error_path": (meas - mod_path) / mod_path,
             }
         )
         traces.append((man.name, r))
@@ -206,13 +229,17 @@ def format_table(result: dict[str, Any]) -> str:
         )
     lines += [
         "",
-        "Manoeuvres (energy over the manoeuvre, kJ)",
-        f"{'manoeuvre':<28} {'slots':>5} {'measured':>9} {'model':>9} {'gap':>8}",
+        "Manoeuvres (energy over the manoeuvre, kJ; model with the chord of each slot and with "
+        "the path flown; * = an agent can command it)",
+        f"{'manoeuvre':<30} {'slots':>5} {'measured':>9} {'chord':>9} {'gap':>8} "
+        f"{'path':>9} {'gap':>8}",
     ]
     for r in result["maneuvers"]:
+        name = ("* " if r["commandable"] else "  ") + r["name"]
         lines.append(
-            f"{r['name']:<28} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
-            f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%}"
+            f"{name:<30} {r['slots']:>5} {r['measured_energy_j'] / 1e3:>9.2f} "
+            f"{r['model_energy_j'] / 1e3:>9.2f} {r['rel_error']:>+8.1%} "
+            f"{r['model_path_energy_j'] / 1e3:>9.2f} {r['rel_error_path']:>+8.1%}"
         )
     ts = result["timestep"]
     cands = ", ".join(f"dt={k} s: {v:.2%}" for k, v in ts["candidates"].items())
