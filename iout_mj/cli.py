@@ -1,4 +1,5 @@
-"""`iout-mj`: link-budget, validate-energy, mission, render, evaluate, figures, train, bench.
+"""`iout-mj`: link-budget, validate-energy, mission, render, evaluate, sweep, figures, train,
+bench.
 
 Exit codes: 0 done; 2 bad input (the message says what is accepted); 3 the physics diverged
 (the mission's metrics are written, marked invalid).
@@ -21,6 +22,7 @@ from iout_mj.commands import (
     cmd_link_budget,
     cmd_mission,
     cmd_render,
+    cmd_sweep,
     cmd_train,
     cmd_validate_energy,
 )
@@ -151,8 +153,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     p.add_argument("--out", help="folder for results.csv / results.json / traces.json")
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        default=None,
+        metavar="ADDRESS",
+        help="run the episodes as Ray tasks: a local instance, or the cluster at ADDRESS",
+    )
     _trust_pickle(p)
     p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser(
+        "sweep", help="Ray Tune trials over scenarios x seeds x hyperparameters", **fmt
+    )
+    p.add_argument(
+        "--config",
+        required=True,
+        help="sweep YAML: base, grid, cpus_per_trial, "
+        "metric, mode (see training/configs/sweep-smoke.yaml)",
+    )
+    p.add_argument("--out", default="runs/sweep", help="folder for the trials, results, best.yaml")
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        default="local",
+        metavar="ADDRESS",
+        help="a local Ray instance, or the cluster at ADDRESS",
+    )
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("train", help="PPO on a scenario (YAML config); checkpoints, resume", **fmt)
     p.add_argument("--config", required=True, help="training/configs/<name>.yaml")

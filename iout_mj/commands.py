@@ -138,6 +138,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         skipped=skipped,
         layout=args.layout,
         base=base,
+        ray_address=args.ray,
     )
     for note in skipped:
         print(note, file=sys.stderr)
@@ -202,4 +203,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
     else:
         report = bench_report.format_markdown if args.markdown else bench_report.format_table
         print(report(result))
+    return 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from iout_mj.experiments import ray_jobs  # ray is optional: imported only when asked
+
+    out = writable_dir(Path(args.out))
+    result = ray_jobs.sweep(args.config, out, args.ray)
+    print(json.dumps(result, indent=2))
     return 0

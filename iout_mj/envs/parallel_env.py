@@ -25,8 +25,9 @@ from iout_mj.world.geometry import unit_xy
 
 def agent_observation_size(n_auvs: int, n_nodes: int) -> int:
     """own position 2, heading 2, speed 1, docked 1, dock distance 1; per node AoI, energy,
-    distance (3K); per other AUV relative position 2 and docked 1; time remaining 1."""
-    return 7 + 3 * n_nodes + 3 * (n_auvs - 1) + 1
+    distance (3K); per other AUV relative position 2 and docked 1; time remaining 1; the
+    agent's one-hot index N (so that a policy shared by all agents can tell them apart)."""
+    return 7 + 3 * n_nodes + 3 * (n_auvs - 1) + 1 + n_auvs
 
 
 def agent_observations(m: Mission) -> np.ndarray:
@@ -57,9 +58,8 @@ def agent_observations(m: Mission) -> np.ndarray:
         rel = (s.positions_m[rest] - s.positions_m[i]) * m.inv_area
         others.append(np.concatenate([rel.ravel(), s.docked[rest].astype(float)]))
     time_left = np.full((n, 1), 1 - s.slot / cfg.scenario.horizon_slots)
-    return np.concatenate([own, nodes, np.array(others).reshape(n, -1), time_left], axis=1).astype(
-        np.float32
-    )
+    parts = [own, nodes, np.array(others).reshape(n, -1), time_left, np.eye(n)]
+    return np.concatenate(parts, axis=1).astype(np.float32)
 
 
 class MultiAUVParallelEnv(ParallelEnv):

@@ -139,11 +139,13 @@ def evaluate(
     skipped: list[str] | None = None,
     layout: str = "paper",
     base: Config | None = None,
+    ray_address: str | None = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run every (policy, N, K, episode) a policy can serve; returns (summary rows, episode
     rows). `layout` and `base` (the env config: current, noise, reward, physics; its N and K
     come from the arguments) are as for `scenario_env`. Cells a trained policy cannot serve
-    (another N, K or action mapping) are skipped and said in `skipped`."""
+    (another N, K or action mapping) are skipped and said in `skipped`. With `ray_address`
+    ("local" or a cluster address) the episodes run as Ray tasks: the same rows."""
     if episodes < 1:
         raise ValueError(f"episodes={episodes}: accepted an integer >= 1")
     if layout not in LAYOUTS:
@@ -161,7 +163,11 @@ def evaluate(
     workers = workers or min(len(jobs), os.cpu_count() or 1)
     bar = tqdm(total=len(jobs), desc="episodes", unit="ep", disable=not progress)
     results = []
-    if workers > 1:
+    if ray_address is not None:
+        from iout_mj.experiments import ray_jobs  # ray is optional: imported only when asked
+
+        results = ray_jobs.run_tasks(_episode, jobs, ray_address, lambda: bar.update(1))
+    elif workers > 1:
         with mp.get_context("spawn").Pool(workers) as pool:
             for row in pool.imap_unordered(_episode, jobs):
                 results.append(row)

@@ -1,0 +1,53 @@
+"""Ray: evaluation episodes as tasks (the same rows as the local pool) and a Tune sweep whose
+trials are the project's trainer, on a local Ray instance bound to loopback."""
+
+import json
+
+import pytest
+import ray
+from conftest import ROOT
+
+from iout_mj.experiments import ray_jobs
+from iout_mj.experiments.evaluate import evaluate
+from iout_mj.schema import ConfigError
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray_jobs.connect("local")
+    yield
+    ray.shutdown()
+
+
+def test_evaluation_on_ray_gives_the_rows_of_the_local_pool(local_ray):
+    args = (["greedy", "tour-scheduler"], [1, 2], [7], 2, 3, "kinematic")
+    local, local_eps = evaluate(*args, workers=1, progress=False)
+    remote, remote_eps = evaluate(*args, progress=False, ray_address="local")
+    assert remote == local
+    key = lambda e: (e["policy"], e["n_auvs"], e["seed"])  # noqa: E731
+    assert json.dumps(sorted(remote_eps, key=key)) == json.dumps(sorted(local_eps, key=key))
+
+
+def test_a_two_trial_sweep_writes_results_and_resumes(local_ray, tmp_path):
+    sweep_file = ROOT / "training" / "configs" / "sweep-smoke.yaml"
+    result = ray_jobs.sweep(sweep_file, tmp_path, "local")
+    assert sorted(r["trial"] for r in result["trials"]) == ["smoke-0", "smoke-1"]
+    assert all(r["num_timesteps"] == 512 for r in result["trials"])
+    assert (tmp_path / "results.csv").read_text().startswith("trial,seed,")
+    assert "seed:" in (tmp_path / "best.yaml").read_text()
+    for trial in ("smoke-0", "smoke-1"):  # each trial is a run folder of the trainer
+        assert (tmp_path / trial / "last" / "policy.json").is_file()
+    again = ray_jobs.sweep(sweep_file, tmp_path, "local")  # resumed: nothing left to train
+    assert again["trials"] == result["trials"]
+
+
+def test_bad_sweep_files_are_clear(tmp_path):
+    bad = tmp_path / "s.yaml"
+    bad.write_text(f"base: {ROOT / 'training' / 'configs' / 'smoke.yaml'}\ngrid: {{gamma: []}}\n")
+    with pytest.raises(ConfigError, match="non-empty list"):
+        ray_jobs.load_sweep(bad)
+    bad.write_text(f"base: {ROOT / 'training' / 'configs' / 'smoke.yaml'}\ngrid: {{speed: [1]}}\n")
+    with pytest.raises(ConfigError, match="accepted fields of the training config"):
+        ray_jobs.load_sweep(bad)
