@@ -16,7 +16,7 @@ import numpy as np
 
 from iout_mj.config import RewardConfig
 from iout_mj.types import BoolArray, FloatArray
-from iout_mj.world.geometry import norm_xy
+from iout_mj.world.geometry import norm_xy, pair_indices
 
 
 @dataclass(frozen=True)
@@ -97,7 +97,7 @@ def _collision(c: SlotContext, r: RewardConfig) -> Any:
     n = c.positions_m.shape[-2]
     if n < 2:
         return np.zeros(c.positions_m.shape[:-2])
-    iu, ju = np.triu_indices(n, k=1)
+    iu, ju = pair_indices(n)
     p = c.positions_m
     gap = np.maximum(0.0, r.safety_distance_m - norm_xy(p[..., iu, :] - p[..., ju, :]))
     pen = 1.0 - np.exp(-(gap**2) / (2 * r.collision_sigma_m**2))

@@ -10,7 +10,7 @@ import numpy as np
 from iout_mj.config import Config
 from iout_mj.mission.state import MissionState
 from iout_mj.types import BoolArray, FloatArray, IntArray
-from iout_mj.world.geometry import norm_xy
+from iout_mj.world.geometry import norm_xy, pair_indices
 from iout_mj.world.network import SensorNetwork, jain_index
 
 COLLISION_DISTANCE_M = 5.0
@@ -59,7 +59,7 @@ def book_separation(s: MissionState, path_m: FloatArray, was_docked: BoolArray) 
     n = path_m.shape[-2]
     if n < 2:
         return
-    iu, ju = np.triu_indices(n, k=1)
+    iu, ju = pair_indices(n)
     gap = norm_xy(path_m[..., iu, :] - path_m[..., ju, :]).min(axis=0)
     gap = np.where(was_docked[..., iu] & was_docked[..., ju], np.inf, gap)
     np.minimum(s.min_separation_m, gap.min(axis=-1), out=s.min_separation_m)

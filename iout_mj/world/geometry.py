@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from iout_mj.types import FloatArray
+from iout_mj.types import FloatArray, IntArray
 
 
 def norm_xy(v: FloatArray) -> FloatArray:
@@ -32,3 +33,10 @@ def pairwise_distance_m(auv_xy: ArrayLike, nodes_xy: ArrayLike) -> FloatArray:
     """Distances (*batch, N, K) between N AUV positions and K node positions."""
     diff = np.asarray(auv_xy, dtype=float)[..., :, None, :] - np.asarray(nodes_xy)[..., None, :, :]
     return norm_xy(diff)
+
+
+@functools.cache
+def pair_indices(n: int) -> tuple[IntArray, IntArray]:
+    """(i, j) index arrays of the n (n - 1) / 2 unordered pairs i < j (cached: per step)."""
+    iu, ju = np.triu_indices(n, k=1)
+    return iu, ju
