@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from iout_mj.envs import ENV_ID, MultiAUVEnv
-from iout_mj.experiments.bench import peak_rss_mb
+from iout_mj.experiments.bench_training import peak_rss_mb
 from iout_mj.mission import REWARD_TERMS
 from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError

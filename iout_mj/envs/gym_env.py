@@ -70,6 +70,8 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
 
     ## Version History
     v0: the paper's system on MuJoCo physics with measured propulsion energy.
+
+    (Over the house's ~150 lines of a class: a third of it is this Gymnasium-style docstring.)
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 30}  # noqa: RUF012

@@ -5,39 +5,26 @@ from __future__ import annotations
 
 import os
 import platform
-import subprocess
-import sys
-import time
 from collections.abc import Callable
-from functools import partial
 from typing import Any
 
-import gymnasium as gym
 import mujoco
 import numpy as np
-import torch
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from iout_mj.backends.mujoco.physics import Stepper
 from iout_mj.backends.mujoco.task import substeps_per_slot
 from iout_mj.config import Config
 from iout_mj.envs import KinematicVecEnv, MultiAUVEnv, PhysicsVecEnv
+from iout_mj.experiments.bench_training import (
+    PHYSICS_BATCH,
+    REPEATS,
+    _worker_rate,
+    median_rate,
+    memory_mb,
+    ppo_fps,
+)
 from iout_mj.scenarios import fixed_config
-from iout_mj.training import TrainConfig, new_model, vec_env
-from iout_mj.training.trainer import make_env
 from iout_mj.types import FloatArray
-
-REPEATS = 3
-
-
-def _median_rate(fn: Callable[[], int], repeats: int = REPEATS) -> float:
-    """Median of `repeats` measurements of items per second; `fn` returns its item count."""
-    rates = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        n = fn()
-        rates.append(n / (time.perf_counter() - t))
-    return float(np.median(rates))
 
 
 def _env(backend: str, n: int, k: int, **kw: Any) -> Any:
@@ -67,11 +54,7 @@ def _env_pass(env: Any, steps: int) -> Callable[[], int]:
 def _env_rate(env: Any, steps: int) -> float:
     run = _env_pass(env, steps)
     run()  # warm up
-    return _median_rate(run)
-
-
-PHYSICS_BATCH = 8
-"""Environments per PhysicsVecEnv call in the benchmarks (the training configuration's)."""
+    return median_rate(run)
 
 
 def _raw_pass(
@@ -97,7 +80,7 @@ def _paired(env_run: Callable[[], int], raw_run: Callable[[], int]) -> dict[str,
     env_run(), raw_run()  # warm up
     pairs = []
     for _ in range(2 * REPEATS - 1):
-        pairs.append((_median_rate(env_run, 1), _median_rate(raw_run, 1)))
+        pairs.append((median_rate(env_run, 1), median_rate(raw_run, 1)))
     env, raw = np.array(pairs).T
     return {
         "env_steps_per_s": float(np.median(env)),
@@ -162,69 +145,7 @@ def kinematic_rate(n: int, k: int, steps: int = 3000) -> dict[str, float]:
         return calls * KINEMATIC_BATCH
 
     run()
-    return {"single_env": single, f"batch_{KINEMATIC_BATCH}": _median_rate(run)}
-
-
-class TrivialEnv(gym.Env):
-    """Same spaces and episode length as the task, no work: the framework's own ceiling."""
-
-    def __init__(self, n: int, k: int) -> None:
-        ref = _env("kinematic", n, k)
-        self.action_space = ref.action_space
-        self.observation_space = ref.observation_space
-        self._obs = np.zeros(ref.observation_space.shape or (), dtype=np.float32)
-        self._horizon = ref.cfg.scenario.horizon_slots
-        self._t = 0
-
-    def reset(self, *, seed: int | None = None, options: Any = None) -> Any:
-        super().reset(seed=seed)
-        self._t = 0
-        return self._obs, {}
-
-    def step(self, action: Any) -> Any:
-        self._t += 1
-        return self._obs, 0.0, False, self._t >= self._horizon, {}
-
-
-def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2) -> float:
-    """PPO steps/s (collection + updates) with the training configuration's hyperparameters
-    and vectorisation (`training.vec_env`: one in-process batch of `n_envs`); None =
-    `TrivialEnv` x `n_envs`, in-process too (DummyVecEnv)."""
-    cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs)
-    torch.set_num_threads(cfg.torch_threads)
-    if backend is None:
-        inner = DummyVecEnv([partial(TrivialEnv, n, k)] * n_envs)
-    else:
-        inner = vec_env(cfg, backend, n_envs, cfg.seed, parallel=True)
-    venv = VecNormalize(inner, gamma=cfg.gamma)
-    model = new_model(cfg, venv)
-    rollout = n_envs * cfg.n_steps
-    model.learn(rollout)  # warm up (worker start, first update)
-    t = time.perf_counter()
-    model.learn(rollouts * rollout, reset_num_timesteps=False)
-    fps = rollouts * rollout / (time.perf_counter() - t)
-    venv.close()
-    return fps
-
-
-def _worker_rate(workers: int, n: int, k: int, steps: int) -> float:
-    cfg = TrainConfig(n_auvs=n, n_nodes=k)
-    venv = SubprocVecEnv(
-        [partial(make_env, cfg, "mujoco", i) for i in range(workers)], start_method="spawn"
-    )
-    venv.reset()
-    rng = np.random.default_rng(0)
-    nvec = venv.action_space.nvec  # type: ignore[attr-defined]
-
-    def run() -> int:
-        for _ in range(steps):
-            venv.step(rng.integers(0, nvec, size=(workers, len(nvec))))
-        return steps * workers
-
-    run()
-    rate = _median_rate(run)
-    venv.close()
-    return rate
+    return {"single_env": single, f"batch_{KINEMATIC_BATCH}": median_rate(run)}
 
 
 def render_fps(frames: int = 16) -> float:
@@ -241,7 +162,7 @@ def render_fps(frames: int = 16) -> float:
             env.render()
         return frames
 
-    rate = _median_rate(run)
+    rate = median_rate(run)
     env.close()
     return rate
 
@@ -260,35 +181,9 @@ def thread_scaling(n: int, k: int, calls: int = 5) -> float:
             return calls * PHYSICS_BATCH
 
         run()
-        rates.append(_median_rate(run))
+        rates.append(median_rate(run))
         venv.close()
     return rates[1] / rates[0]
-
-
-def peak_rss_mb(code: str) -> float:
-    """Peak resident memory (VmHWM) of a fresh Python process running `code`."""
-    code += "\nprint(open('/proc/self/status').read().split('VmHWM:')[1].split()[0])\n"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return int(out.stdout.split()[-1]) / 1024
-
-
-def memory_mb(n_envs: int = PHYSICS_BATCH) -> dict[str, float]:
-    """Peak resident memory of one MuJoCo env over an episode, and of PPO training on the
-    MuJoCo backend as configured (one process: `n_envs` scenes, rollout threads, PPO)."""
-    one = peak_rss_mb(
-        "import gymnasium as gym, iout_mj\n"
-        "env = gym.make('iout_mj/MultiAUV-v0', backend='mujoco', n_auvs=2, n_nodes=7)\n"
-        "env.reset(seed=0)\n"
-        "for _ in range(55): env.step(env.action_space.sample())\n"
-    )
-    train = peak_rss_mb(
-        "from stable_baselines3.common.vec_env import VecNormalize\n"
-        "from iout_mj.training import TrainConfig, new_model, vec_env\n"
-        f"cfg = TrainConfig(n_auvs=2, n_nodes=7, n_envs={n_envs}, n_steps=64, batch_size=64)\n"
-        f"venv = VecNormalize(vec_env(cfg, 'mujoco', {n_envs}, 0, parallel=True))\n"
-        f"new_model(cfg, venv).learn({2 * 64 * n_envs})\n"
-    )
-    return {"one_env_mb": one, "training_mb": train, "training_envs": n_envs}
 
 
 def run_all(quick: bool = False, say: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
