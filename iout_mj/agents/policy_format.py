@@ -120,6 +120,7 @@ def save_policy(
     tensors = {f"policy.{k}": v.detach().cpu().contiguous() for k, v in policy.state_dict().items()}
     tensors.update(extra_tensors or {})
     save_file(tensors, str(tmp / WEIGHTS))
+    _fsync_file(tmp / WEIGHTS)
     write_atomic(tmp / NORMALIZATION, _json_bytes(normalization))
     obs_space, act_space = policy.observation_space, policy.action_space
     assert isinstance(obs_space, gym.spaces.Box) and isinstance(act_space, gym.spaces.MultiDiscrete)
@@ -142,6 +143,11 @@ def save_policy(
     tmp.rename(folder)  # a kill before this line leaves a complete <folder>.tmp
     shutil.rmtree(old, ignore_errors=True)
     _fsync_dir(folder.parent)
+
+
+def _fsync_file(path: Path) -> None:
+    with path.open("rb") as f:
+        os.fsync(f.fileno())
 
 
 def _fsync_dir(folder: Path) -> None:
