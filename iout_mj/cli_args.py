@@ -56,8 +56,9 @@ def writable_dir(path: Path) -> Path:
     return path
 
 
-def load_config(path: str | None) -> Config:
-    return Config.load(path) if path else Config()
+def _file_scenario(config: str) -> dict[str, Any]:
+    """The scenario keys a config file sets itself (not the defaults it inherits)."""
+    return load_mapping(config, "config file").get("scenario") or {}
 
 
 def evaluation_config(config: str | None) -> Config:
@@ -65,7 +66,7 @@ def evaluation_config(config: str | None) -> Config:
     is refused rather than silently overridden."""
     if config is None:
         return Config()
-    scenario = load_mapping(config, "config file").get("scenario") or {}
+    scenario = _file_scenario(config)
     fixed = sorted({"n_auvs", "nodes_m"} & set(scenario))
     if fixed:
         raise ConfigError(
@@ -88,7 +89,7 @@ def scenario_from_flags(
         return fixed_config(n, k, base)  # N and K; the env draws the nodes every episode
     if config is None:
         return fixed_config(2 if n_auvs is None else n_auvs, 7 if n_nodes is None else n_nodes)
-    scenario = load_mapping(config, "config file").get("scenario") or {}
+    scenario = _file_scenario(config)
     base = Config.load(config)
     sets_n, sets_k = "n_auvs" in scenario, "nodes_m" in scenario
     for flag, given, sets, has in (

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from iout_mj.cli_args import evaluation_config, load_config, scenario_from_flags, writable_dir
-from iout_mj.scenarios import fixed_config
+from iout_mj.cli_args import evaluation_config, scenario_from_flags, writable_dir
+from iout_mj.scenarios import fixed_config, load_config
 from iout_mj.world import acoustics
 
 DIVERGED = 3

@@ -30,7 +30,7 @@ from iout_mj.agents.registry import POLICIES, make_policy
 from iout_mj.agents.shipped import SHIPPED_DIR, shipped_policies
 from iout_mj.config import Config
 from iout_mj.envs.gym_env import ENV_ID
-from iout_mj.errors import PolicyError
+from iout_mj.errors import PolicyError, PolicyMismatchError
 
 LEGACY_FILES = ("model.zip", "vecnormalize.pkl")
 ACTION_MAPPING = ("heading_levels", "speed_levels", "dtheta_max_deg", "dv_max_mps", "v_max_mps")
@@ -61,7 +61,7 @@ def check_fits(manifest: dict[str, Any], folder: Path, env: Any) -> None:
         manifest.get("observation_size"),
         manifest.get("action_nvec"),
     ) != (obs_size, nvec):
-        raise PolicyError(
+        raise PolicyMismatchError(
             f"policy {folder} was trained for N={want_n}, K={want_k} (observation "
             f"{manifest.get('observation_size')}, actions {manifest.get('action_nvec')}); "
             f"this env has N={mission.n_auvs}, K={mission.n_nodes} (observation {obs_size}, "
@@ -71,7 +71,7 @@ def check_fits(manifest: dict[str, Any], folder: Path, env: Any) -> None:
     motion = env.unwrapped.cfg.motion
     for key in ACTION_MAPPING:
         if key in trained and trained[key] != getattr(motion, key):
-            raise PolicyError(
+            raise PolicyMismatchError(
                 f"policy {folder} was trained with motion.{key}={trained[key]}; this env has "
                 f"{getattr(motion, key)}: its action indices would mean other manoeuvres"
             )

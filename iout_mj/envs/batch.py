@@ -8,6 +8,7 @@ and the gymnasium VectorEnv adapt (no stable-baselines3, no gymnasium here).
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -20,6 +21,23 @@ from iout_mj.scenarios import ConfigLike, resolve_config
 from iout_mj.types import BoolArray, FloatArray
 
 BACKENDS = ("mujoco", "kinematic")
+DIVERGED = "physics diverged (MuJoCo reset the state)"
+
+
+@dataclass
+class BatchStep:
+    """One step of the batch, environments that ended already restarted."""
+
+    obs: np.ndarray
+    """(B, D) observations; the first of a new episode where one ended."""
+    rewards: FloatArray
+    """(B,) rewards, 0 where the physics diverged."""
+    terminated: BoolArray
+    """(B,) all docked, a battery empty, or the physics diverged."""
+    truncated: BoolArray
+    """(B,) T_max reached."""
+    ended: dict[int, tuple[np.ndarray, dict[str, Any]]] = field(default_factory=dict)
+    """Env index -> (its last observation, {"metrics": ..., and "error" if it diverged})."""
 
 
 class MissionBatch:
@@ -76,6 +94,25 @@ class MissionBatch:
         meters = command(self.mission, self.physics, actions)
         failed = self.stepper.step(self.physics, self.substeps)
         return book(self.mission, self.physics, meters), failed
+
+    def step(self, actions: Any) -> BatchStep:
+        """Move every environment one slot, then restart those that ended (autoreset)."""
+        m = self.mission
+        rewards, failed = self.move(actions)
+        obs = m.flat_observation()
+        terminated = m.state.terminated | failed
+        truncated = m.state.truncated & ~failed
+        done = terminated | truncated
+        ended: dict[int, tuple[np.ndarray, dict[str, Any]]] = {}
+        if done.any():
+            for e in np.flatnonzero(done):
+                info: dict[str, Any] = {"metrics": m.metrics(int(e))}
+                if failed[e]:
+                    info["error"] = DIVERGED
+                ended[int(e)] = (obs[e].copy(), info)
+            self.restart(done)
+            obs[done] = m.flat_observation()[done]
+        return BatchStep(obs, np.where(failed, 0.0, rewards), terminated, truncated, ended)
 
     def close(self) -> None:
         if self.stepper is not None:

@@ -174,8 +174,8 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
             info["metrics"] = mission.metrics()
         if self.render_mode == "rgb_array_list":
             self.renderer.record_slot()
-        elif self._renderer is not None:
-            self._renderer.record_slot()
+        elif self._renderer is not None:  # rgb_array: trails only, nobody takes slot frames
+            self._renderer.record_slot(keep_frames=False)
         return obs.copy(), float(ts.reward), terminated, truncated, info
 
     def _failed(self, error: str) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:

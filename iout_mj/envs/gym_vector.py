@@ -80,30 +80,17 @@ class MultiAUVVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if self._needs_reset:
             raise RuntimeError("step() before reset(): call reset() first")
-        m = self.mission
-        rewards, failed = self.batch.move(actions)
-        obs = m.flat_observation()
-        terminated = m.state.terminated | failed
-        truncated = m.state.truncated & ~failed
-        rewards = np.where(failed, 0.0, rewards)
+        step = self.batch.step(actions)
         infos: dict[str, Any] = {
             "reward_terms": {
-                k: np.broadcast_to(v, (self.num_envs,)).astype(float) for k, v in m.terms.items()
+                k: np.broadcast_to(v, (self.num_envs,)).astype(float)
+                for k, v in self.mission.terms.items()
             },
             "_reward_terms": np.ones(self.num_envs, dtype=bool),
         }
-        done = terminated | truncated
-        if done.any():
-            for e in np.flatnonzero(done):
-                final: dict[str, Any] = {"metrics": m.metrics(int(e))}
-                if failed[e]:
-                    final["error"] = "physics diverged (MuJoCo reset the state)"
-                infos = self._add_info(
-                    infos, {"final_obs": obs[e].copy(), "final_info": final}, int(e)
-                )
-            self.batch.restart(done)
-            obs[done] = m.flat_observation()[done]
-        return obs, rewards, terminated, truncated, infos
+        for e, (final_obs, final) in step.ended.items():
+            infos = self._add_info(infos, {"final_obs": final_obs, "final_info": final}, e)
+        return step.obs, step.rewards, step.terminated, step.truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
         self.batch.close()

@@ -34,8 +34,11 @@ class MissionVecEnv(VecEnv):
         n_envs: B, the number of environments.
         n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
         seed: seeds the one RNG of the batch (also `venv.seed(s)` before `reset()`).
-        backend: "kinematic" or "mujoco"; nthread: C threads of the MuJoCo rollout.
+        nthread: C threads of the MuJoCo rollout (0: the calling thread; at most one per core
+            helps).
     """
+
+    backend = "kinematic"
 
     def __init__(
         self,
@@ -45,10 +48,11 @@ class MissionVecEnv(VecEnv):
         layout: str = "paper",
         config: ConfigLike = None,
         seed: int | None = None,
-        backend: str = "kinematic",
         nthread: int = 0,
     ):
-        self.batch = MissionBatch(n_envs, backend, n_auvs, n_nodes, layout, config, seed, nthread)
+        self.batch = MissionBatch(
+            n_envs, self.backend, n_auvs, n_nodes, layout, config, seed, nthread
+        )
         self.cfg, self.mission = self.batch.cfg, self.batch.mission
         self.render_mode = None
         super().__init__(self.batch.n_envs, *spaces(self.mission))
@@ -86,26 +90,17 @@ class MissionVecEnv(VecEnv):
         self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
-        m = self.mission
-        rewards, failed = self.batch.move(self._actions)
-        obs = m.flat_observation()
-        terminated = m.state.terminated | failed
-        done = terminated | m.state.truncated
+        step = self.batch.step(self._actions)
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        if done.any():
-            for e in np.flatnonzero(done):
-                infos[e] = {
-                    "terminal_observation": obs[e].copy(),
-                    "TimeLimit.truncated": bool(not terminated[e]),
-                    "metrics": m.metrics(int(e)),
-                }
-                if failed[e]:
-                    infos[e]["error"] = "physics diverged (MuJoCo reset the state)"
-                    infos[e]["terminal_observation"] = np.zeros_like(obs[e])
-            self.batch.restart(done)
-            obs[done] = m.flat_observation()[done]
-        rewards = np.where(failed, 0.0, rewards).astype(np.float32)
-        return obs, rewards, done, infos
+        for e, (final_obs, final) in step.ended.items():
+            infos[e] = {
+                # a diverged scene has no meaningful last state
+                "terminal_observation": np.zeros_like(final_obs) if "error" in final else final_obs,
+                "TimeLimit.truncated": bool(step.truncated[e]),
+                **final,
+            }
+        done = step.terminated | step.truncated
+        return step.obs, step.rewards.astype(np.float32), done, infos
 
     def close(self) -> None:
         self.batch.close()
@@ -141,31 +136,11 @@ class MissionVecEnv(VecEnv):
 class KinematicVecEnv(MissionVecEnv):
     """B kinematic environments stepped together; spaces as `iout_mj/MultiAUV-v0`."""
 
-    def __init__(
-        self,
-        n_envs: int,
-        n_auvs: int | None = None,
-        n_nodes: int | None = None,
-        layout: str = "paper",
-        config: ConfigLike = None,
-        seed: int | None = None,
-    ):
-        super().__init__(n_envs, n_auvs, n_nodes, layout, config, seed, backend="kinematic")
+    backend = "kinematic"
 
 
 class PhysicsVecEnv(MissionVecEnv):
     """B MuJoCo environments stepped together by one `mujoco.rollout` call per step; spaces as
-    `iout_mj/MultiAUV-v0`. `nthread`: C threads of the rollout (0: the calling thread; at most
-    one per core helps)."""
+    `iout_mj/MultiAUV-v0`."""
 
-    def __init__(
-        self,
-        n_envs: int,
-        n_auvs: int | None = None,
-        n_nodes: int | None = None,
-        layout: str = "paper",
-        config: ConfigLike = None,
-        seed: int | None = None,
-        nthread: int = 0,
-    ):
-        super().__init__(n_envs, n_auvs, n_nodes, layout, config, seed, "mujoco", nthread)
+    backend = "mujoco"

@@ -20,10 +20,11 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from iout_mj.agents.policies import PolicyError, load_policy
+from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
 from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
+from iout_mj.errors import PolicyError, PolicyMismatchError
 from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
 from iout_mj.scenarios import LAYOUTS, fixed_config
 from iout_mj.schema import ConfigError
@@ -92,9 +93,7 @@ def _cells(
         try:
             load_policy(name, env, trust_pickle=trust_pickle)
             cells.append((name, n, k))
-        except PolicyError as exc:
-            if "trained" not in str(exc):
-                raise
+        except PolicyMismatchError as exc:
             skipped.append(f"skipped {name} at N={n}, K={k}: {exc}")
         finally:
             env.close()

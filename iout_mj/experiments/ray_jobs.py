@@ -20,7 +20,7 @@ import ray
 import yaml
 from ray import tune
 
-from iout_mj.schema import ConfigError, build_dataclass, load_mapping, to_plain
+from iout_mj.schema import ConfigError, build_dataclass, load_mapping
 from iout_mj.training import TrainConfig, train
 
 LOCAL = "local"
@@ -141,7 +141,7 @@ def sweep(path: str | Path, out: Path, address: str | None) -> dict[str, Any]:
         writer.writerows(rows)
     (out / "results.json").write_text(json.dumps(rows, indent=2) + "\n")
     best = next(t for t in spec["trials"] if t["name"] == rows[0]["trial"])
-    (out / "best.yaml").write_text(yaml.safe_dump(to_plain(best["config"]), sort_keys=False))
+    (out / "best.yaml").write_text(yaml.safe_dump(best["config"], sort_keys=False))
     return {"trials": rows, "best": best["name"], "out": str(out)}
 
 

@@ -122,7 +122,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "[0, 1]",
     ),
 )
-OBSERVATION_NAMES = tuple(g.name for g in OBSERVATION_LAYOUT)
 
 
 def observe(mission: Mission) -> dict[str, FloatArray]:

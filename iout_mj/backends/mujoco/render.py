@@ -119,12 +119,14 @@ class MissionRenderer:
         return d
 
     # ------------------------------------------------------------------ frames
-    def record_slot(self) -> None:
-        """Render the frames of the slot that just ended (call after each env step)."""
+    def record_slot(self, keep_frames: bool = True) -> None:
+        """Extend the trails by the slot that just ended (call after each env step) and, with
+        `keep_frames`, render its frames for `take_frames`."""
         for xy, yaw in self._substep_poses():
             for i in range(self.mission.n_auvs):
                 self.trails[i].append(xy[i].copy())
-            self._pending.append(self._compose(xy, yaw))
+            if keep_frames:
+                self._pending.append(self._compose(xy, yaw))
         self._slot_start_pose = self._pose_now()
 
     def record_frame(self) -> None:
