@@ -191,6 +191,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--overwrite", action="store_true", help="replace the run already in <out> (not resumed)"
     )
+    p.add_argument(
+        "--seed",
+        type=int_at_least(0),
+        help="training seed instead of the config's (default run folder runs/<name>-seed<S>)",
+    )
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("bench", help="throughput benchmarks (ratios measured in one run)", **fmt)

@@ -7,6 +7,7 @@ Each command imports the layers it runs when it runs: torch and stable-baselines
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -171,7 +172,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     from iout_mj.training import TrainConfig, train  # heavy: see the module docstring
 
     cfg = TrainConfig.load(args.config)
-    out = writable_dir(Path(args.out or f"runs/{cfg.name}"))
+    name = cfg.name
+    if args.seed is not None:
+        cfg, name = dataclasses.replace(cfg, seed=args.seed), f"{cfg.name}-seed{args.seed}"
+    out = writable_dir(Path(args.out or f"runs/{name}"))
     state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
     summary = {
         "out": str(out),

@@ -35,11 +35,17 @@ def _wrap(angle: FloatArray) -> FloatArray:
 
 
 def steer(
-    mission: Mission, targets_m: FloatArray, speeds_mps: FloatArray
+    mission: Mission, targets_m: FloatArray, speeds_mps: FloatArray, crab: bool = False
 ) -> tuple[IntArray, IntArray]:
-    """Heading and speed indices that turn each AUV toward its target and toward a speed."""
+    """Heading and speed indices that turn each AUV toward its target and toward a speed;
+    with `crab`, the heading also cancels the ocean current across the track."""
     delta = targets_m - mission.state.positions_m
     want = np.arctan2(delta[:, 1], delta[:, 0])
+    if crab:
+        c = mission.state.current_mps
+        across = np.cos(want) * c[1] - np.sin(want) * c[0]  # to the left of the track
+        water = np.maximum(mission.state.speed_sp, 0.5)
+        want = want - np.arcsin(np.clip(across / water, -0.9, 0.9))
     dtheta = _wrap(want - mission.state.heading_sp)
     h = np.abs(mission.actions.dtheta_rad[None, :] - dtheta[:, None]).argmin(axis=1)
     dv = speeds_mps - mission.state.speed_sp

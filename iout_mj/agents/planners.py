@@ -150,18 +150,34 @@ class TourScheduler:
         offsets = np.stack([np.cos(angles), np.sin(angles)], 1) * (mission.n_auvs > 1)
         return centre + LOITER_SPREAD_M * offsets
 
+    @staticmethod
+    def _final_speed(mission: Mission) -> float:
+        """Speed of the final approach: FINAL_APPROACH_MPS through the water plus the current's
+        speed, so that the AUV still makes way against it."""
+        return FINAL_APPROACH_MPS + float(np.hypot(*mission.state.current_mps))
+
     def _must_dock(self, mission: Mission) -> BoolArray:
-        """Head into the dock when the final approach (slowing to FINAL_APPROACH_MPS, turning,
-        flying to the zone's edge) takes all the slots left, with one to spare."""
+        """Head into the dock when the final approach (slowing to the final speed, turning,
+        flying to the zone's edge at the ground speeds the current allows) takes all the slots
+        left, with one to spare."""
         s, m, slot_s = mission.state, mission.cfg.motion, mission.cfg.scenario.slot_s
         delta = mission.dock_m - s.positions_m
         turn = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - s.heading_sp))
         turn_slots = np.ceil(turn / np.radians(m.dtheta_max_deg))
-        slow_slots = np.maximum(s.speed_sp - FINAL_APPROACH_MPS, 0) / m.dv_max_mps
+        final = self._final_speed(mission)
+        slow_slots = np.maximum(s.speed_sp - final, 0) / m.dv_max_mps
+        # the current along the way to the dock (against: negative), and across it
+        toward = delta / np.maximum(np.linalg.norm(delta, axis=1, keepdims=True), 1e-9)
+        along = toward @ s.current_mps
+        across = np.abs(toward[:, 0] * s.current_mps[1] - toward[:, 1] * s.current_mps[0])
+
+        def ground(speed: float) -> FloatArray:
+            return np.maximum(np.sqrt(np.maximum(speed**2 - across**2, 0)) + along, 0.1)
+
         edge_m = np.maximum(s.dock_dist_m - 0.6 * mission.cfg.scenario.dock_radius_m, 0)
         near_m = np.minimum(edge_m, FINAL_STRETCH_M)  # the last stretch, slowly
-        travel_slots = (edge_m - near_m) / (CRUISE_MPS * slot_s) + near_m / (
-            FINAL_APPROACH_MPS * slot_s
+        travel_slots = (edge_m - near_m) / (ground(CRUISE_MPS) * slot_s) + near_m / (
+            ground(final) * slot_s
         )
         left = mission.cfg.scenario.horizon_slots - s.slot
         return turn_slots + slow_slots + travel_slots + 2 >= left
@@ -184,9 +200,10 @@ class TourScheduler:
         loiter = ~touring & (dist < 2 * NODE_REACHED_M)
         dock = self._must_dock(mission)
         targets = np.where(dock[:, None], mission.dock_m, targets)
-        dock_speed = np.minimum(approach_speed(s.dock_dist_m, slot_s), FINAL_APPROACH_MPS + 1.0)
+        final = self._final_speed(mission)
+        dock_speed = np.clip(approach_speed(s.dock_dist_m, slot_s), final, final + 1.0)
         speed = np.where(dock, dock_speed, np.where(loiter, 0.8, speed))
-        h, sp = steer(mission, targets, speed)
+        h, sp = steer(mission, targets, speed, crab=True)
         h = np.where(loiter & ~dock, mission.cfg.motion.heading_levels - 1, h)  # circle
         d = pairwise_distance_m(s.positions_m, nodes)
         wet = np.array([t[0] if t else 0 for t in self._tours], dtype=np.int64)

@@ -57,7 +57,14 @@ def check_fits(manifest: dict[str, Any], folder: Path, env: Any) -> None:
     mission = env.unwrapped.mission
     obs_size, nvec = env.observation_space.shape[0], [int(v) for v in env.action_space.nvec]
     want_n, want_k = manifest.get("n_auvs"), manifest.get("n_nodes")
-    if (want_n, want_k) != (mission.n_auvs, mission.n_nodes) or (
+    if manifest.get("policy") == "tokens":
+        k_max = manifest.get("k_max", 0)
+        if want_n != mission.n_auvs or mission.n_nodes > k_max:
+            raise PolicyMismatchError(
+                f"policy {folder} serves N={want_n} AUVs and up to {k_max} nodes; this env has "
+                f"N={mission.n_auvs}, K={mission.n_nodes}"
+            )
+    elif (want_n, want_k) != (mission.n_auvs, mission.n_nodes) or (
         manifest.get("observation_size"),
         manifest.get("action_nvec"),
     ) != (obs_size, nvec):
@@ -133,12 +140,7 @@ def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) 
 
         act.reset = baseline.reset  # type: ignore[attr-defined]
         return act
-    loaded = read_trained(name, env, trust_pickle)
-
-    def act_trained(_env: Any, obs: np.ndarray) -> np.ndarray:
-        return loaded.act(obs)
-
-    return act_trained
+    return read_trained(name, env, trust_pickle)
 
 
 def convert_legacy(src: Path, dst: Path, env_config: Config, extra: dict[str, Any]) -> None:

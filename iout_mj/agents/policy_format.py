@@ -30,6 +30,8 @@ from safetensors.torch import load_file, save_file
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from iout_mj.agents.shipped import MANIFEST
+from iout_mj.agents.token_policy import TokenPolicy
+from iout_mj.mission.tokens import observe_tokens
 
 FORMAT = "iout-mj-policy"
 SCHEMA_VERSION = 1
@@ -74,9 +76,22 @@ class LoadedPolicy:
     """The VecNormalize a legacy policy was read with (None in the safe format)."""
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """The deterministic action for one observation (or a batch)."""
+        """The deterministic action for one observation (or a batch) of the policy's kind."""
         action, _ = self.policy.predict(self.normalizer(obs), deterministic=True)
         return action
+
+    @property
+    def general(self) -> bool:
+        """A general policy (any K up to its K_max) observing tokens."""
+        return self.manifest.get("policy") == "tokens"
+
+    def __call__(self, env: Any, obs: np.ndarray) -> np.ndarray:
+        """The action in a gymnasium env (`rollout.EnvPolicy`): the env's observation, or
+        for a general policy the token observation of its mission."""
+        if self.general:
+            mission = env.unwrapped.mission
+            return self.act(observe_tokens(mission, self.manifest["k_max"]))
+        return self.act(obs)
 
 
 def sha256(path: Path) -> str:
@@ -130,7 +145,7 @@ def save_policy(
         "algorithm": "PPO",
         "observation_size": int(obs_space.shape[0]),
         "action_nvec": [int(v) for v in act_space.nvec],
-        "net_arch": policy.net_arch,
+        **_network(policy),
         **manifest,
         "files": {name: sha256(tmp / name) for name in (WEIGHTS, NORMALIZATION)},
     }
@@ -143,6 +158,14 @@ def save_policy(
     tmp.rename(folder)  # a kill before this line leaves a complete <folder>.tmp
     shutil.rmtree(old, ignore_errors=True)
     _fsync_dir(folder.parent)
+
+
+def _network(policy: ActorCriticPolicy) -> dict[str, Any]:
+    """The manifest's description of the network (enough to rebuild it)."""
+    if isinstance(policy, TokenPolicy):
+        args = policy.token_args
+        return {"policy": "tokens", "k_max": args["k_max"], "width": args["width"]}
+    return {"policy": "mlp", "net_arch": policy.net_arch}
 
 
 def _fsync_file(path: Path) -> None:
@@ -256,9 +279,17 @@ def build_policy(manifest: dict[str, Any], tensors: dict[str, torch.Tensor]) -> 
         -1.0, 2.0, shape=(int(manifest["observation_size"]),), dtype=np.float32
     )
     act_space = gym.spaces.MultiDiscrete(np.asarray(manifest["action_nvec"], dtype=np.int64))
-    policy = ActorCriticPolicy(
-        obs_space, act_space, lambda _: 0.0, net_arch=manifest.get("net_arch")
-    )
+    policy: ActorCriticPolicy
+    try:
+        if manifest.get("policy") == "tokens":
+            k_max, width = int(manifest["k_max"]), int(manifest["width"])
+            policy = TokenPolicy(obs_space, act_space, lambda _: 0.0, k_max=k_max, width=width)
+        else:
+            policy = ActorCriticPolicy(
+                obs_space, act_space, lambda _: 0.0, net_arch=manifest.get("net_arch")
+            )
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        raise PolicyFormatError(f"the manifest's network cannot be built: {exc}") from exc
     state = {k[len("policy.") :]: v for k, v in tensors.items() if k.startswith("policy.")}
     try:
         policy.load_state_dict(state, strict=True)

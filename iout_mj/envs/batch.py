@@ -17,10 +17,12 @@ from iout_mj.backends.kinematic import move
 from iout_mj.backends.mujoco.physics import AUVPhysics, Stepper
 from iout_mj.backends.mujoco.task import book, command, start_episode, substeps_per_slot
 from iout_mj.mission import Mission
+from iout_mj.mission.tokens import observe_tokens
 from iout_mj.scenarios import ConfigLike, resolve_config
 from iout_mj.types import BoolArray, FloatArray
 
 BACKENDS = ("mujoco", "kinematic")
+OBSERVATIONS = ("flat", "tokens")
 DIVERGED = "physics diverged (MuJoCo reset the state)"
 
 
@@ -49,6 +51,7 @@ class MissionBatch:
         n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
         seed: seeds the one RNG of the batch.
         nthread: C threads of the MuJoCo rollout (0: the calling thread).
+        observation: "flat" (the env's) or "tokens" (`mission.tokens`, padded to K_MAX nodes).
     """
 
     def __init__(
@@ -61,7 +64,12 @@ class MissionBatch:
         config: ConfigLike = None,
         seed: int | None = None,
         nthread: int = 0,
+        observation: str = "flat",
     ):
+        if observation not in OBSERVATIONS:
+            raise ValueError(
+                f"observation={observation!r} is invalid: accepted one of {OBSERVATIONS}"
+            )
         if not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
             raise ValueError(f"n_envs={n_envs!r} is invalid: accepted an integer >= 1")
         if backend not in BACKENDS:
@@ -79,6 +87,13 @@ class MissionBatch:
             self.substeps = substeps_per_slot(self.cfg, self.physics[0].dt_s)
             self.stepper = Stepper(nthread)
         self._none_failed = np.zeros(self.n_envs, dtype=bool)
+        self.observation = observation
+
+    def observe(self) -> np.ndarray:
+        """(B, D) observations of the current state."""
+        if self.observation == "tokens":
+            return observe_tokens(self.mission)
+        return self.mission.flat_observation()
 
     def restart(self, mask: BoolArray | None = None) -> None:
         """Start new episodes where `mask` (everywhere for None), drawing from the batch RNG."""
@@ -99,7 +114,7 @@ class MissionBatch:
         """Move every environment one slot, then restart those that ended (autoreset)."""
         m = self.mission
         rewards, failed = self.move(actions)
-        obs = m.flat_observation()
+        obs = self.observe()
         terminated = m.state.terminated | failed
         truncated = m.state.truncated & ~failed
         done = terminated | truncated
@@ -111,7 +126,7 @@ class MissionBatch:
                     info["error"] = DIVERGED
                 ended[int(e)] = (obs[e].copy(), info)
             self.restart(done)
-            obs[done] = m.flat_observation()[done]
+            obs[done] = self.observe()[done]
         return BatchStep(obs, np.where(failed, 0.0, rewards), terminated, truncated, ended)
 
     def close(self) -> None:

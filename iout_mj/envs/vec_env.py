@@ -22,9 +22,22 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from iout_mj.envs.batch import MissionBatch
+from iout_mj.envs.batch import BatchStep, MissionBatch
 from iout_mj.envs.gym_env import spaces
 from iout_mj.scenarios import ConfigLike
+
+
+def step_infos(step: BatchStep, n_envs: int) -> list[dict[str, Any]]:
+    """SB3's info dicts of a batch step: empty, or the end of an episode."""
+    infos: list[dict[str, Any]] = [{} for _ in range(n_envs)]
+    for e, (final_obs, final) in step.ended.items():
+        infos[e] = {
+            # a diverged scene has no meaningful last state
+            "terminal_observation": np.zeros_like(final_obs) if "error" in final else final_obs,
+            "TimeLimit.truncated": bool(step.truncated[e]),
+            **final,
+        }
+    return infos
 
 
 class MissionVecEnv(VecEnv):
@@ -91,16 +104,8 @@ class MissionVecEnv(VecEnv):
 
     def step_wait(self) -> VecEnvStepReturn:
         step = self.batch.step(self._actions)
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for e, (final_obs, final) in step.ended.items():
-            infos[e] = {
-                # a diverged scene has no meaningful last state
-                "terminal_observation": np.zeros_like(final_obs) if "error" in final else final_obs,
-                "TimeLimit.truncated": bool(step.truncated[e]),
-                **final,
-            }
         done = step.terminated | step.truncated
-        return step.obs, step.rewards.astype(np.float32), done, infos
+        return step.obs, step.rewards.astype(np.float32), done, step_infos(step, self.num_envs)
 
     def close(self) -> None:
         self.batch.close()

@@ -36,6 +36,38 @@ class PhaseConfig:
         require(self.timesteps >= 1, "timesteps", self.timesteps, "an integer >= 1")
 
 
+POLICIES = ("mlp", "tokens")
+NOISE_MODELS = ("flat", "wenz")
+
+
+@dataclass(frozen=True)
+class ImitationConfig:
+    """Warm start of a general policy by DAgger from a planner (`training.imitation`)."""
+
+    planner: str = "tour-scheduler"
+    episodes: int = 300
+    """Episodes the planner flies first."""
+    epochs: int = 30
+    rounds: int = 3
+    """DAgger rounds after the first fit: the policy flies, the planner labels."""
+    round_episodes: int = 150
+    round_epochs: int = 15
+    beta: float = 0.5
+    """Probability that the planner acts in DAgger round 1; it halves every round."""
+    learning_rate: float = 1e-3
+
+    def __post_init__(self) -> None:
+        from iout_mj.agents.registry import POLICIES as PLANNERS
+
+        check_finite(self)
+        require(self.planner in PLANNERS, "planner", self.planner, f"one of {sorted(PLANNERS)}")
+        for name in ("episodes", "epochs", "round_episodes", "round_epochs"):
+            require(getattr(self, name) >= 1, name, getattr(self, name), "an integer >= 1")
+        require(self.rounds >= 0, "rounds", self.rounds, "an integer >= 0")
+        require(0 <= self.beta <= 1, "beta", self.beta, "a number in [0, 1]")
+        positive(self, "learning_rate")
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Hyperparameters (rl-zoo style), keyed by scenario; the defaults are those of the
@@ -61,6 +93,16 @@ class TrainConfig:
     gae_lambda: float = 0.95
     clip_range: float = 0.2
     net_arch: tuple[int, ...] = (256, 256)
+    policy: str = "mlp"
+    """"mlp" (the flat observation, one K) or "tokens" (`agents.token_policy`, any K)."""
+    node_range: tuple[int, int] = (3, 20)
+    """tokens: K of the scenario cells trained on (every K in the range, random layouts)."""
+    noise_models: tuple[str, ...] = ("flat", "wenz")
+    """tokens: the noise models of the cells (each K with each model)."""
+    width: int = 64
+    """tokens: the width of the token network."""
+    imitation: ImitationConfig | None = None
+    """tokens: warm start by DAgger from a planner before PPO (None: none)."""
     seed: int = 0
     eval_every_steps: int = 20_000
     eval_episodes: int = 10
@@ -99,13 +141,35 @@ class TrainConfig:
             self.net_arch,
             "a non-empty list of layer widths >= 1",
         )
-        if (self.n_envs * self.n_steps) % self.batch_size:
+        require(self.policy in POLICIES, "policy", self.policy, f"one of {POLICIES}")
+        lo, hi = self.node_range
+        require(
+            MIN_NODES <= lo <= hi <= MAX_NODES,
+            "node_range",
+            list(self.node_range),
+            f"[low, high] with {MIN_NODES} <= low <= high <= {MAX_NODES}",
+        )
+        require(
+            bool(self.noise_models) and set(self.noise_models) <= set(NOISE_MODELS),
+            "noise_models",
+            list(self.noise_models),
+            f"a non-empty list of {NOISE_MODELS}",
+        )
+        require(self.width >= 4, "width", self.width, "an integer >= 4")
+        if (self.envs * self.n_steps) % self.batch_size:
             raise ConfigError(
                 f"batch_size={self.batch_size} must divide n_envs*n_steps="
-                f"{self.n_envs * self.n_steps}"
+                f"{self.envs * self.n_steps}"
             )
         if not self.phases:
             raise ConfigError("phases: accepted a non-empty list of {backend, timesteps}")
+
+    @property
+    def envs(self) -> int:
+        """Environments trained on: n_envs, or with tokens n_envs per scenario cell."""
+        if self.policy == "mlp":
+            return self.n_envs
+        return self.n_envs * (self.node_range[1] - self.node_range[0] + 1) * len(self.noise_models)
 
     @property
     def total_timesteps(self) -> int:
@@ -121,5 +185,7 @@ class TrainConfig:
         d = asdict(self)
         d["phases"] = [dict(p) for p in d["phases"]]
         d["net_arch"] = list(self.net_arch)
+        d["node_range"] = list(self.node_range)
+        d["noise_models"] = list(self.noise_models)
         d["env"] = self.env.to_dict()
         return d

@@ -4,6 +4,7 @@ normalisation statistics)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 from pathlib import Path
@@ -15,6 +16,7 @@ import torch
 import yaml
 from stable_baselines3 import PPO
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm import tqdm
 
@@ -26,11 +28,16 @@ from iout_mj.agents.policy_format import (
     write_atomic,
 )
 from iout_mj.agents.rollout import run_episode
+from iout_mj.agents.token_policy import TokenPolicy
+from iout_mj.config import Config
 from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
+from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
+from iout_mj.mission.tokens import K_MAX
 from iout_mj.mission.stats import episode_summary
 from iout_mj.schema import ConfigError
 from iout_mj.training.callbacks import EvalCheckpointCallback, MissionLoggerCallback
 from iout_mj.training.checkpoints import Resumed, RunState, recover, restore, save_checkpoint
+from iout_mj.training import imitation
 from iout_mj.training.config import TrainConfig
 
 HELD_OUT_SEED = 1_000_000
@@ -56,14 +63,38 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
     return Monitor(env)
 
 
+def scenario_cells(cfg: TrainConfig) -> list[tuple[int, Config]]:
+    """(K, env config) of every scenario cell a general policy trains on."""
+    lo, hi = cfg.node_range
+    cells = []
+    for noise in cfg.noise_models:
+        env = dataclasses.replace(
+            cfg.env,
+            acoustics=dataclasses.replace(cfg.env.acoustics, noise_model=noise),
+            scenario=dataclasses.replace(cfg.env.scenario, n_auvs=cfg.n_auvs),
+        )
+        cells += [(k, env) for k in range(lo, hi + 1)]
+    return cells
+
+
 def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bool) -> Any:
-    """The training VecEnv: one batch of `n_envs` environments in this process, for either
-    backend; with `parallel`, the MuJoCo rollout runs on one C thread per core."""
+    """The training VecEnv: one batch of `n_envs` environments in this process (with tokens,
+    `n_envs` per scenario cell), for either backend; with `parallel`, the MuJoCo rollout runs
+    on one C thread per core."""
+    threads = min(n_envs, os.cpu_count() or 1) if parallel and backend == "mujoco" else 0
+    if cfg.policy == "tokens":
+        return VecMonitor(ScenarioVecEnv(scenario_cells(cfg), n_envs, backend, seed, threads))
     args = (n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout, cfg.env)
     if backend == "kinematic":
         return VecMonitor(KinematicVecEnv(*args, seed=seed))
-    threads = min(n_envs, os.cpu_count() or 1) if parallel else 0
     return VecMonitor(PhysicsVecEnv(*args, seed=seed, nthread=threads))
+
+
+def network(cfg: TrainConfig) -> dict[str, Any]:
+    """What a policy manifest says of the network of `cfg`."""
+    if cfg.policy == "tokens":
+        return {"policy": "tokens", "k_max": K_MAX, "width": cfg.width}
+    return {"policy": "mlp", "net_arch": list(cfg.net_arch)}
 
 
 def _lr_schedule(cfg: TrainConfig) -> Any:
@@ -80,14 +111,10 @@ def evaluate_model(
 ) -> dict[str, float]:
     """Deterministic episodes on held-out seeds: the mean episode summary and return."""
     env = scenario_env(cfg, backend)
-    loaded = LoadedPolicy(model.policy, Normalizer.from_vec_normalize(stats), {})
-
-    def policy(env: Any, obs: np.ndarray) -> Any:
-        return loaded.act(obs)
-
+    loaded = LoadedPolicy(model.policy, Normalizer.from_vec_normalize(stats), network(cfg))
     rows = []
     for e in range(episodes):
-        metrics = run_episode(env, policy, seed + e)
+        metrics = run_episode(env, loaded, seed + e)
         rows.append({"return": metrics["return"], **episode_summary(metrics)})
     env.close()
     return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
@@ -101,8 +128,13 @@ def selection_score(metrics: dict[str, float]) -> float:
 
 def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> Any:
     """A fresh PPO with the config's hyperparameters on `venv`."""
+    if cfg.policy == "tokens":
+        policy: Any = TokenPolicy
+        kwargs: dict[str, Any] = {"k_max": K_MAX, "width": cfg.width}
+    else:
+        policy, kwargs = "MlpPolicy", {"net_arch": list(cfg.net_arch)}
     return PPO(
-        "MlpPolicy",
+        policy,
         venv,
         learning_rate=_lr_schedule(cfg),
         n_steps=cfg.n_steps,
@@ -115,9 +147,36 @@ def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> A
         seed=cfg.seed,
         device="cpu",
         verbose=0,
-        policy_kwargs={"net_arch": list(cfg.net_arch)},
+        policy_kwargs=kwargs,
         tensorboard_log=None if tensorboard is None else str(tensorboard),
     )
+
+
+def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> None:
+    """DAgger from the config's planner (`training.imitation`) on the scenario cells; the
+    return statistics of the planner's episodes become the VecNormalize's."""
+    im = cfg.imitation
+    assert im is not None
+    rng = np.random.RandomState(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    cells = scenario_cells(cfg)
+    data = imitation.Demonstrations()
+    imitation.fly(cells, im.episodes, rng, None, 1.0, im.planner, data)
+    epochs, beta = im.epochs, im.beta
+
+    def learner(tokens: np.ndarray) -> np.ndarray:
+        action, _ = model.policy.predict(tokens, deterministic=True)
+        return action
+
+    for r in range(im.rounds + 1):
+        acc, nll, rms = imitation.fit(model.policy, data, cfg.gamma, epochs, im.learning_rate, rng)
+        if progress:
+            print(f"imitation round {r}: {len(data.obs)} states, accuracy {np.round(acc, 3)}, "
+                  f"nll {nll:.3f}", flush=True)
+        if r < im.rounds:
+            imitation.fly(cells, im.round_episodes, rng, learner, beta, im.planner, data)
+            epochs, beta = im.round_epochs, beta / 2
+    model.get_vec_normalize_env().ret_rms = rms
 
 
 RUN_FILES = ("config.yaml", "state.json", "last", "best", "last.tmp", "last.old", "best.tmp")
@@ -148,7 +207,11 @@ def _start(cfg: TrainConfig, out: Path, resume: bool, overwrite: bool) -> None:
 def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path) -> Any:
     """The model of a phase on `venv`: new for the first phase (or to be restored from a
     checkpoint), else the previous phase's model and statistics on the new backend."""
-    normalized = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
+    # token features are scaled already (and padded with a mask): not normalised
+    norm_obs = cfg.policy == "mlp"
+    normalized = VecNormalize(venv, norm_obs=norm_obs, norm_reward=True, gamma=cfg.gamma)
+    if not norm_obs:  # the identity transform, saved with the policy like any statistics
+        normalized.obs_rms = RunningMeanStd(shape=venv.observation_space.shape)
     if model is None:
         return new_model(cfg, normalized, out / "tb")
     stats = model.get_vec_normalize_env()
@@ -211,7 +274,11 @@ def train(
         phase = cfg.phases[index]
         phase_end = phase_start + phase.timesteps
         venv = vec_env(cfg, phase.backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
+        fresh = model is None and not resume
         model = _phase_model(model, cfg, venv, out)
+        if fresh and cfg.imitation is not None:
+            warm_start(model, cfg, progress)
+            checkpoint(model)
         if resume and resumed is None:
             resumed = restore(model, out / "last")
             mid_phase = read_manifest(out / "last").get("env_phase") == index
