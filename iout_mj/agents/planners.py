@@ -113,6 +113,8 @@ LOITER_SPREAD_M = 120.0
 """Distance of each AUV's loiter point from the nodes' centroid (N > 1)."""
 FINAL_STRETCH_M = 150.0
 """The last stretch to the dock zone, flown at FINAL_APPROACH_MPS."""
+CURRENT_SPARE_SLOTS_PER_MPS = 6.0
+"""Slots to spare at the docking decision per m/s of current (the drift while turning)."""
 FINAL_APPROACH_MPS = 1.2
 """Speed of the last approach into the dock (a turning circle that fits the dock zone)."""
 
@@ -180,7 +182,9 @@ class TourScheduler:
             ground(final) * slot_s
         )
         left = mission.cfg.scenario.horizon_slots - s.slot
-        return turn_slots + slow_slots + travel_slots + 2 >= left
+        # one slot to spare, and more against a current (its drift while turning)
+        spare = 2 + CURRENT_SPARE_SLOTS_PER_MPS * float(np.hypot(*s.current_mps))
+        return turn_slots + slow_slots + travel_slots + spare >= left
 
     def __call__(self, mission: Mission) -> IntArray:
         s, net = mission.state, mission.network
@@ -202,6 +206,13 @@ class TourScheduler:
         targets = np.where(dock[:, None], mission.dock_m, targets)
         final = self._final_speed(mission)
         dock_speed = np.clip(approach_speed(s.dock_dist_m, slot_s), final, final + 1.0)
+        # facing away from a near dock: turn slowly, on a circle that fits the dock zone
+        delta = mission.dock_m - s.positions_m
+        away = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - s.heading_sp))
+        tight = (away > 2 * np.radians(mission.cfg.motion.dtheta_max_deg)) & (
+            s.dock_dist_m < FINAL_STRETCH_M
+        )
+        dock_speed = np.where(tight, max(0.8, final - FINAL_APPROACH_MPS + 0.3), dock_speed)
         speed = np.where(dock, dock_speed, np.where(loiter, 0.8, speed))
         h, sp = steer(mission, targets, speed, crab=True)
         h = np.where(loiter & ~dock, mission.cfg.motion.heading_levels - 1, h)  # circle

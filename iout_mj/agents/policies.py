@@ -107,8 +107,14 @@ def _legacy(folder: Path, env: Any) -> LoadedPolicy:
     return LoadedPolicy(model.policy, Normalizer.from_vec_normalize(stats), manifest, stats)
 
 
+GENERAL = "ppo-general"
+"""The general policies' name: `ppo-general-n<N>` for the env's N."""
+
+
 def read_trained(name: str, env: Any, trust_pickle: bool = False) -> LoadedPolicy:
     """A trained policy by name or folder, checked against `env`."""
+    if name == GENERAL:
+        name = f"{GENERAL}-n{env.unwrapped.mission.n_auvs}"
     folder = resolve_policy_folder(name)
     if (folder / MANIFEST).is_file():
         try:

@@ -2,14 +2,15 @@
 
 Node tokens (`mission.tokens`) are embedded by one shared MLP and mixed by masked
 self-attention; the context (global and AUV features, masked mean and max of the nodes) gives
-each AUV a query, which scores every node for AET and for the uplink (pointer-style logits,
-query-key dot products; padded nodes at -1e8, so they are never chosen) and gives its heading and speed logits. The
-critic reads the context. SB3's PPO trains it unchanged: the network is its `mlp_extractor`,
+each AUV a query, which scores every node for AET and for the uplink (pointer-style logits:
+query-key dot products; padded nodes at -1e8, so they are never chosen) and gives its heading
+and speed logits. The critic reads the context. SB3's PPO trains it unchanged: the network is its `mlp_extractor`,
 its output the logits of the `MultiDiscrete([H, S, K_max, K_max] * N)` action.
 """
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import gymnasium as gym
@@ -24,7 +25,7 @@ MASKED_LOGIT = -1e8
 
 def _mlp(*sizes: int) -> nn.Sequential:
     layers: list[nn.Module] = []
-    for a, b in zip(sizes[:-1], sizes[1:]):
+    for a, b in itertools.pairwise(sizes):
         layers += [nn.Linear(a, b), nn.Tanh()]
     return nn.Sequential(*layers[:-1])
 
@@ -72,7 +73,9 @@ class TokenNet(nn.Module):
         ctx = self.context(torch.cat([glob, auvs.flatten(1), mean, peak], -1))
         return ctx, auvs, emb, mask
 
-    def actor(self, ctx: torch.Tensor, auvs: torch.Tensor, emb: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    def actor(
+        self, ctx: torch.Tensor, auvs: torch.Tensor, emb: torch.Tensor, mask: torch.Tensor
+    ) -> torch.Tensor:
         b = ctx.shape[0]
         eye = torch.eye(self.n, device=ctx.device).expand(b, -1, -1)
         q = self.query(torch.cat([ctx[:, None].expand(-1, self.n, -1), auvs, eye], -1))

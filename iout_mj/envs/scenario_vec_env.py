@@ -7,6 +7,7 @@ cells at once. The cells share one RNG (layouts and currents are drawn from it).
 from __future__ import annotations
 
 from collections.abc import Sequence
+
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
@@ -22,7 +23,9 @@ def token_spaces(cfg: Config) -> tuple[gym.spaces.Box, gym.spaces.MultiDiscrete]
     """Observation and action space of a general policy for the config's N and motion."""
     n, m = cfg.scenario.n_auvs, cfg.motion
     observation = gym.spaces.Box(OBS_LOW, OBS_HIGH, shape=(token_size(n),), dtype=np.float32)
-    return observation, gym.spaces.MultiDiscrete([m.heading_levels, m.speed_levels, K_MAX, K_MAX] * n)
+    return observation, gym.spaces.MultiDiscrete(
+        [m.heading_levels, m.speed_levels, K_MAX, K_MAX] * n
+    )
 
 
 class ScenarioVecEnv(MissionVecEnv):
@@ -48,9 +51,7 @@ class ScenarioVecEnv(MissionVecEnv):
             raise ValueError("cells: accepted a non-empty list of (n_nodes, config)")
         n_auvs = cells[0][1].scenario.n_auvs
         self.batches = [
-            MissionBatch(
-                envs_per_cell, backend, n_auvs, k, "random", cfg, None, nthread, "tokens"
-            )
+            MissionBatch(envs_per_cell, backend, n_auvs, k, "random", cfg, None, nthread, "tokens")
             for k, cfg in cells
         ]
         self.backend = backend
@@ -79,12 +80,13 @@ class ScenarioVecEnv(MissionVecEnv):
 
     def step_wait(self) -> VecEnvStepReturn:
         actions = np.asarray(self._actions)
-        steps = [b.step(actions[lo : lo + b.n_envs]) for b, lo in zip(self.batches, self._bounds)]
+        bounds = zip(self.batches, self._bounds[:-1], strict=True)
+        steps = [b.step(actions[lo : lo + b.n_envs]) for b, lo in bounds]
         return (
             np.concatenate([s.obs for s in steps]),
             np.concatenate([s.rewards for s in steps]).astype(np.float32),
             np.concatenate([s.terminated | s.truncated for s in steps]),
-            [info for b, s in zip(self.batches, steps) for info in step_infos(s, b.n_envs)],
+            [i for b, s in zip(self.batches, steps, strict=True) for i in step_infos(s, b.n_envs)],
         )
 
     def close(self) -> None:

@@ -32,12 +32,12 @@ from iout_mj.agents.token_policy import TokenPolicy
 from iout_mj.config import Config
 from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
 from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
-from iout_mj.mission.tokens import K_MAX
 from iout_mj.mission.stats import episode_summary
+from iout_mj.mission.tokens import K_MAX
 from iout_mj.schema import ConfigError
+from iout_mj.training import imitation
 from iout_mj.training.callbacks import EvalCheckpointCallback, MissionLoggerCallback
 from iout_mj.training.checkpoints import Resumed, RunState, recover, restore, save_checkpoint
-from iout_mj.training import imitation
 from iout_mj.training.config import TrainConfig
 
 HELD_OUT_SEED = 1_000_000
@@ -171,8 +171,11 @@ def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> None:
     for r in range(im.rounds + 1):
         acc, nll, rms = imitation.fit(model.policy, data, cfg.gamma, epochs, im.learning_rate, rng)
         if progress:
-            print(f"imitation round {r}: {len(data.obs)} states, accuracy {np.round(acc, 3)}, "
-                  f"nll {nll:.3f}", flush=True)
+            print(
+                f"imitation round {r}: {len(data.obs)} states, accuracy {np.round(acc, 3)}, "
+                f"nll {nll:.3f}",
+                flush=True,
+            )
         if r < im.rounds:
             imitation.fly(cells, im.round_episodes, rng, learner, beta, im.planner, data)
             epochs, beta = im.round_epochs, beta / 2

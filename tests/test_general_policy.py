@@ -1,0 +1,180 @@
+"""The general policy: token observations, the K-independent network, the scenario VecEnv,
+the DAgger warm start and the whole pipeline through the command line."""
+
+import dataclasses
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from conftest import ROOT
+
+from iout_mj.agents.policies import load_policy
+from iout_mj.agents.rollout import run_episode
+from iout_mj.agents.token_policy import TokenPolicy
+from iout_mj.config import Config
+from iout_mj.envs import ENV_ID
+from iout_mj.envs.batch import MissionBatch
+from iout_mj.envs.scenario_vec_env import ScenarioVecEnv, token_spaces
+from iout_mj.mission.tokens import K_MAX, node_features, observe_tokens, token_size
+from iout_mj.scenarios import make_config
+from iout_mj.schema import ConfigError, build_dataclass
+from iout_mj.training import imitation
+from iout_mj.training.config import TrainConfig
+
+
+def _tokens(n: int, k: int, seed: int = 0) -> tuple[np.ndarray, object]:
+    env = gym.make(ENV_ID, n_auvs=n, n_nodes=k, backend="kinematic", layout="random")
+    env.reset(seed=seed)
+    return observe_tokens(env.unwrapped.mission), env
+
+
+@pytest.mark.parametrize("n, k", [(1, 3), (2, 11), (2, 30)])
+def test_tokens_pad_to_k_max_with_a_mask_and_stay_in_bounds(n, k):
+    obs, _ = _tokens(n, k)
+    assert obs.shape == (token_size(n),) and obs.dtype == np.float32
+    mask = obs[-K_MAX:]
+    assert mask.sum() == k and np.all(mask[:k] == 1)
+    nodes = obs[-K_MAX - K_MAX * node_features(n) : -K_MAX].reshape(K_MAX, -1)
+    assert np.all(nodes[k:] == 0) and np.any(nodes[:k] != 0)
+    assert obs.min() >= -1 and obs.max() <= 2
+
+
+def test_batched_tokens_equal_single_env_tokens():
+    batch = MissionBatch(3, "kinematic", 2, 9, "random", seed=4, observation="tokens")
+    batch.restart()
+    for _ in range(5):
+        step = batch.step(np.tile([5, 4, 1, 2, 6, 3, 8, 0], (3, 1)))
+    env = gym.make(ENV_ID, n_auvs=2, n_nodes=9, backend="kinematic", layout="random").unwrapped
+    for e in range(3):  # one env set to the batch row's state gives the same tokens
+        env.reset(seed=0)
+        m, b = env.mission, batch.mission
+        for f in dataclasses.fields(m.state):
+            getattr(m.state, f.name)[...] = getattr(b.state, f.name)[e]
+        for name in ("nodes_m", "energy_j", "aoi", "service_count"):
+            getattr(m.network, name)[...] = getattr(b.network, name)[e]
+        np.testing.assert_array_equal(observe_tokens(m), step.obs[e])
+
+
+def test_one_network_serves_every_k_and_never_picks_a_padded_node():
+    cfg = make_config(2, 7)
+    policy = TokenPolicy(*token_spaces(cfg), lambda _: 1e-3, width=16)
+    for k in (2, 3, 17, 30):
+        obs, env = _tokens(2, k, seed=k)
+        batch = torch.as_tensor(np.repeat(obs[None], 500, axis=0))
+        nodes = policy.get_distribution(batch).sample().numpy().reshape(500, 2, 4)[..., 2:]
+        assert nodes.max() < k and nodes.min() >= 0
+        metrics = run_episode(
+            env,
+            lambda e, o: policy.predict(observe_tokens(e.unwrapped.mission), deterministic=True)[0],
+            1,
+        )
+        assert metrics["mission_slots"] >= 1
+
+
+def test_scenario_vec_env_spans_its_cells_and_restarts_episodes():
+    base = Config()
+    wenz = dataclasses.replace(
+        base, acoustics=dataclasses.replace(base.acoustics, noise_model="wenz")
+    )
+    venv = ScenarioVecEnv([(3, base), (12, wenz)], envs_per_cell=2, seed=1)
+    obs = venv.reset()
+    assert (
+        obs.shape == (4, token_size(2)) and venv.action_space.nvec.tolist() == [11, 7, 30, 30] * 2
+    )
+    assert obs[:, -K_MAX:].sum(axis=1).tolist() == [3, 3, 12, 12]
+    ended = 0
+    for _ in range(60):
+        a = np.tile([5, 6, 0, 1, 5, 6, 2, 0], (4, 1))
+        obs, rewards, _dones, infos = venv.step(a)
+        ended += sum("metrics" in i for i in infos)
+        assert np.all(np.isfinite(rewards))
+    assert ended >= 4  # every environment ended an episode (T_max = 55) and restarted
+    with pytest.raises(ValueError, match="out of range"):  # node 5 does not exist where K = 3
+        venv.step(np.tile([5, 6, 5, 1, 5, 6, 2, 0], (4, 1)))
+
+
+def test_imitation_learns_the_planners_actions():
+    base = dataclasses.replace(
+        make_config(1, 7), physics=dataclasses.replace(Config().physics, current_jitter_mps=0.3)
+    )
+    cells = [(4, base), (6, base)]
+    policy = TokenPolicy(*token_spaces(base), lambda _: 1e-3, width=32)
+    data = imitation.Demonstrations()
+    rng = np.random.RandomState(0)
+    metrics = imitation.fly(cells, 6, rng, None, 1.0, "tour-scheduler", data)
+    assert len(data.obs) == sum(len(r) for r in data.rewards) and len(metrics) == 6
+    before, *_ = imitation.fit(policy, data, 0.99, 1, learning_rate=1e-9, rng=rng)
+    after, nll, rms = imitation.fit(policy, data, 0.99, 25, rng=rng)
+    # the AET node (a tour target) and the uplink node are learned well above chance
+    assert after[2] > before[2] + 0.2 and after[3] > before[3] + 0.1
+    assert rms.var > 0 and np.isfinite(nll)
+
+
+def test_general_training_config_round_trips_and_rejects_bad_values(tmp_path):
+    cfg = TrainConfig.load(ROOT / "training/configs/ppo-general-n2.yaml")
+    assert cfg.policy == "tokens" and cfg.imitation is not None and cfg.node_range == (3, 20)
+    assert cfg.envs == 36 and cfg.env.physics.current_jitter_mps == 0.5
+    path = tmp_path / "c.yaml"
+    path.write_text(json.dumps(cfg.to_dict()))
+    assert TrainConfig.load(path.rename(tmp_path / "c.json")) == cfg
+    for bad, match in (
+        ({"node_range": [5, 3]}, "node_range"),
+        ({"noise_models": ["pink"]}, "noise_models"),
+        ({"policy": "cnn"}, "policy"),
+        ({"imitation": {"planner": "oracle"}}, "planner"),
+        ({"imitation": {"rounds": -1}}, "rounds"),
+    ):
+        with pytest.raises(ConfigError, match=match):
+            build_dataclass(TrainConfig, {**cfg.to_dict(), **bad}, "general")
+
+
+@pytest.mark.slow
+def test_general_pipeline_trains_saves_and_flies_any_k(tmp_path, cli):
+    out = tmp_path / "run"
+    cli("train", "--config", ROOT / "training/configs/smoke-general.yaml", "--out", out)
+    manifest = json.loads((out / "best" / "policy.json").read_text())
+    assert manifest["policy"] == "tokens" and manifest["k_max"] == K_MAX
+    # phase 0 starts from the DAgger checkpoint at step 0
+    history = json.loads((out / "state.json").read_text())["history"]
+    assert history[0]["num_timesteps"] == 0 and history[-1]["backend"] == "mujoco"
+    result = cli(
+        "evaluate",
+        "--policy",
+        out / "best",
+        "--n-auvs",
+        1,
+        "--nodes",
+        3,
+        25,
+        "--layout",
+        "random",
+        "--episodes",
+        1,
+        "--backend",
+        "kinematic",
+        "--workers",
+        1,
+        "--json",
+    )
+    rows = json.loads(result.stdout)
+    assert [r["n_nodes"] for r in rows] == [3, 25] and all(r["layout"] == "random" for r in rows)
+    refused = cli(
+        "evaluate",
+        "--policy",
+        out / "best",
+        "--n-auvs",
+        2,
+        "--nodes",
+        5,
+        "--episodes",
+        1,
+        "--backend",
+        "kinematic",
+        "--json",
+        check=False,
+    )
+    assert json.loads(refused.stdout or "[]") == []  # N = 2 is not its N: the cell is skipped
+    env = gym.make(ENV_ID, n_auvs=1, n_nodes=30, backend="kinematic", layout="random")
+    assert callable(load_policy(str(out / "best"), env))
