@@ -17,7 +17,9 @@ from iout_mj.agents.shipped import shipped_policies
 from iout_mj.cli_args import int_at_least, positive_distance
 from iout_mj.commands import (
     cmd_bench,
+    cmd_compare,
     cmd_evaluate,
+    cmd_export,
     cmd_figures,
     cmd_link_budget,
     cmd_mission,
@@ -197,6 +199,22 @@ def build_parser() -> argparse.ArgumentParser:
         help="training seed instead of the config's (default run folder runs/<name>-seed<S>)",
     )
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser(
+        "compare", help="a policy against a reference in every cell of an evaluation", **fmt
+    )
+    p.add_argument("--results", required=True, help="a folder from evaluate --out")
+    p.add_argument("--policy", required=True, help="the policy's name in the results")
+    p.add_argument("--reference", default="tour-scheduler", help="the policy to compare with")
+    p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
+    p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser(
+        "export", help="a training checkpoint as a policy folder to ship or share", **fmt
+    )
+    p.add_argument("checkpoint", help="a run's best/ or last/ folder")
+    p.add_argument("out", help="the policy folder to write (replaced whole)")
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("bench", help="throughput benchmarks (ratios measured in one run)", **fmt)
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")

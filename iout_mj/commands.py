@@ -186,6 +186,27 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    from iout_mj.experiments import compare
+
+    table = compare.compare(compare.read_rows(Path(args.results)), args.policy, args.reference)
+    if args.json:
+        print(json.dumps(table, indent=2))
+    else:
+        print(compare.format_markdown(table, args.policy, args.reference))
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from iout_mj.training.checkpoints import export_policy  # heavy: see the module docstring
+
+    out = Path(args.out)
+    writable_dir(out.parent)
+    kept = export_policy(Path(args.checkpoint), out)
+    print(json.dumps({"out": str(out), "eval_at_selection": kept["eval_at_selection"]}, indent=2))
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from iout_mj.experiments import bench, bench_report  # heavy: see the module docstring
 

@@ -176,5 +176,13 @@ def test_general_pipeline_trains_saves_and_flies_any_k(tmp_path, cli):
         check=False,
     )
     assert json.loads(refused.stdout or "[]") == []  # N = 2 is not its N: the cell is skipped
+    shipped = tmp_path / "shipped"
+    cli("export", out / "best", shipped)
+    manifest = json.loads((shipped / "policy.json").read_text())
+    assert "rng" not in manifest and manifest["eval_at_selection"]["num_timesteps"] >= 0
+    weights = (shipped / "weights.safetensors").stat().st_size
+    assert weights < (out / "best" / "weights.safetensors").stat().st_size  # no optimizer
     env = gym.make(ENV_ID, n_auvs=1, n_nodes=30, backend="kinematic", layout="random")
-    assert callable(load_policy(str(out / "best"), env))
+    policy, checkpoint = load_policy(str(shipped), env), load_policy(str(out / "best"), env)
+    obs, _ = env.reset(seed=3)
+    np.testing.assert_array_equal(policy(env, obs), checkpoint(env, obs))

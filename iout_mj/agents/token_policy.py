@@ -4,8 +4,9 @@ Node tokens (`mission.tokens`) are embedded by one shared MLP and mixed by maske
 self-attention; the context (global and AUV features, masked mean and max of the nodes) gives
 each AUV a query, which scores every node for AET and for the uplink (pointer-style logits:
 query-key dot products; padded nodes at -1e8, so they are never chosen) and gives its heading
-and speed logits. The critic reads the context. SB3's PPO trains it unchanged: the network is its `mlp_extractor`,
-its output the logits of the `MultiDiscrete([H, S, K_max, K_max] * N)` action.
+and speed logits. The critic reads the context. SB3's PPO trains it unchanged: the network is
+its `mlp_extractor`, its output the logits of the `MultiDiscrete([H, S, K_max, K_max] * N)`
+action.
 """
 
 from __future__ import annotations

@@ -4,8 +4,16 @@ from typing import Any
 
 from iout_mj.envs.gym_env import BACKENDS, ENV_ID, MultiAUVEnv
 
-__all__ = ["BACKENDS", "ENV_ID", "KinematicVecEnv", "MissionVecEnv", "MultiAUVEnv", "PhysicsVecEnv"]
-_VEC_ENVS = ("KinematicVecEnv", "MissionVecEnv", "PhysicsVecEnv")
+__all__ = [
+    "BACKENDS",
+    "ENV_ID",
+    "KinematicVecEnv",
+    "MissionVecEnv",
+    "MultiAUVEnv",
+    "PhysicsVecEnv",
+    "WarpVecEnv",
+]
+_VEC_ENVS = ("KinematicVecEnv", "MissionVecEnv", "PhysicsVecEnv", "WarpVecEnv")
 
 
 def __getattr__(name: str) -> Any:

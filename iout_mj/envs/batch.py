@@ -16,12 +16,13 @@ import numpy as np
 from iout_mj.backends.kinematic import move
 from iout_mj.backends.mujoco.physics import AUVPhysics, Stepper
 from iout_mj.backends.mujoco.task import book, command, start_episode, substeps_per_slot
+from iout_mj.backends.mujoco.warp_stepper import WarpStepper
 from iout_mj.mission import Mission
 from iout_mj.mission.tokens import observe_tokens
 from iout_mj.scenarios import ConfigLike, resolve_config
 from iout_mj.types import BoolArray, FloatArray
 
-BACKENDS = ("mujoco", "kinematic")
+BACKENDS = ("mujoco", "kinematic", "warp")
 OBSERVATIONS = ("flat", "tokens")
 DIVERGED = "physics diverged (MuJoCo reset the state)"
 
@@ -47,7 +48,8 @@ class MissionBatch:
 
     Args:
         n_envs: B, the number of environments.
-        backend: "kinematic" or "mujoco".
+        backend: "kinematic", "mujoco" (C MuJoCo) or "warp" (MuJoCo Warp on a GPU, else on
+            Warp's CPU device; the same scenes, see `backends.mujoco.warp_stepper`).
         n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
         seed: seeds the one RNG of the batch.
         nthread: C threads of the MuJoCo rollout (0: the calling thread).
@@ -82,10 +84,10 @@ class MissionBatch:
         self.random = np.random.RandomState(seed)
         self.physics: list[AUVPhysics] = []
         self.stepper: Stepper | None = None
-        if backend == "mujoco":
+        if backend in ("mujoco", "warp"):
             self.physics = [AUVPhysics.from_config(self.cfg) for _ in range(self.n_envs)]
             self.substeps = substeps_per_slot(self.cfg, self.physics[0].dt_s)
-            self.stepper = Stepper(nthread)
+            self.stepper = WarpStepper() if backend == "warp" else Stepper(nthread)
         self._none_failed = np.zeros(self.n_envs, dtype=bool)
         self.observation = observation
 

@@ -149,3 +149,10 @@ class PhysicsVecEnv(MissionVecEnv):
     `iout_mj/MultiAUV-v0`."""
 
     backend = "mujoco"
+
+
+class WarpVecEnv(MissionVecEnv):
+    """B MuJoCo scenes stepped together by MuJoCo Warp (a GPU when there is one, else Warp's
+    CPU device); spaces, rules and meters as `PhysicsVecEnv`."""
+
+    backend = "warp"

@@ -23,6 +23,7 @@ import torch
 
 from iout_mj.agents.policy_format import (
     MANIFEST,
+    NORMALIZATION,
     PolicyFormatError,
     normalization_dict,
     read_manifest,
@@ -171,3 +172,27 @@ def restore(model: Any, folder: Path) -> Resumed:
     env_rng = _restore_rngs(tensors, manifest["rng"])
     random.setstate(ast.literal_eval(manifest["rng"]["python"]))  # a tuple literal, no eval
     return Resumed(RunState(**manifest["run_state"]), env_rng)
+
+
+TRAINING_ONLY = ("run_state", "num_timesteps", "n_updates", "optimizer_param_groups", "rng")
+"""Manifest entries a checkpoint needs for --resume and a shipped policy does not."""
+
+
+def export_policy(checkpoint: Path, out: Path) -> dict[str, Any]:
+    """A checkpoint as a policy to ship: its network and normalisation, its manifest without
+    the optimizer, RNG and run state, with the evaluation it was selected on."""
+    try:
+        manifest = read_manifest(checkpoint)
+        tensors = read_tensors(checkpoint)
+        normalization = json.loads((checkpoint / NORMALIZATION).read_text())
+    except (PolicyFormatError, OSError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"cannot export {checkpoint}: {exc}") from exc
+    from iout_mj.agents.policy_format import build_policy
+
+    policy = build_policy(manifest, tensors)
+    kept = {
+        k: v for k, v in manifest.items() if k not in (*TRAINING_ONLY, "files", "eval", "env_phase")
+    }
+    kept["eval_at_selection"] = manifest.get("eval")
+    save_policy(out, policy, normalization, kept)
+    return kept

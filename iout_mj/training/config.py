@@ -20,7 +20,7 @@ from iout_mj.schema import (
     require,
 )
 
-BACKENDS = ("mujoco", "kinematic")
+BACKENDS = ("mujoco", "kinematic", "warp")
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 
 

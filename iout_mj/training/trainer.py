@@ -30,7 +30,7 @@ from iout_mj.agents.policy_format import (
 from iout_mj.agents.rollout import run_episode
 from iout_mj.agents.token_policy import TokenPolicy
 from iout_mj.config import Config
-from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
+from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv, WarpVecEnv
 from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
 from iout_mj.mission.stats import episode_summary
 from iout_mj.mission.tokens import K_MAX
@@ -85,9 +85,8 @@ def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bo
     if cfg.policy == "tokens":
         return VecMonitor(ScenarioVecEnv(scenario_cells(cfg), n_envs, backend, seed, threads))
     args = (n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout, cfg.env)
-    if backend == "kinematic":
-        return VecMonitor(KinematicVecEnv(*args, seed=seed))
-    return VecMonitor(PhysicsVecEnv(*args, seed=seed, nthread=threads))
+    kinds = {"kinematic": KinematicVecEnv, "mujoco": PhysicsVecEnv, "warp": WarpVecEnv}
+    return VecMonitor(kinds[backend](*args, seed=seed, nthread=threads))
 
 
 def network(cfg: TrainConfig) -> dict[str, Any]:

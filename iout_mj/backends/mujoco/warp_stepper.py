@@ -1,0 +1,176 @@
+"""MuJoCo Warp stepping of B scenes at once: the `Stepper` interface on a GPU (or Warp's CPU
+device), so that the mission, the energy meter and the videos stay those of the C backend.
+
+Every AUVPhysics stays the host mirror of its world: once per slot its state, controls and
+current go to the device, `mujoco_warp.step` runs the substeps (captured once as a CUDA graph
+on a GPU), a small kernel after every substep integrates |force x velocity| of every actuator
+(the C backend's meter) and records the positions (the separation metric, video replay), and
+the slot's end state comes back. MuJoCo Warp computes in float32: positions near 700 m would
+keep only ~60 um, so each world's x and y are re-based to the AUVs' start of slot, with the
+arena's walls (the slide joints' limits) moved by the same offsets (the scene has no contacts
+and a uniform current: nothing else depends on absolute position); the offsets are added back
+in float64.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from iout_mj.types import BoolArray
+
+GPU_EXTRA = "pip install 'iout-mj[gpu]' (mujoco-warp and warp-lang)"
+
+
+def _import_warp() -> tuple[Any, Any]:
+    try:
+        import mujoco_warp as mjw
+        import warp as wp
+    except ImportError as exc:
+        raise ImportError(f"backend 'warp' needs MuJoCo Warp: {GPU_EXTRA} ({exc})") from exc
+    wp.config.quiet = True
+    return wp, mjw
+
+
+def default_device() -> str:
+    """'cuda' when Warp sees a GPU, else 'cpu'."""
+    wp, _ = _import_warp()
+    wp.init()
+    return "cuda" if wp.is_cuda_available() else "cpu"
+
+
+_KERNELS: dict[str, Any] = {}
+
+
+def _kernels() -> dict[str, Any]:
+    """The two per-substep kernels (defined on first use: importing warp is optional)."""
+    if _KERNELS:
+        return _KERNELS
+    wp, _ = _import_warp()
+
+    @wp.kernel
+    def meter(
+        sensordata: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        force_adr: wp.array(dtype=int),  # type: ignore[valid-type]
+        velocity_adr: wp.array(dtype=int),  # type: ignore[valid-type]
+        dt: float,
+        work: wp.array2d(dtype=float),  # type: ignore[valid-type]
+    ) -> None:
+        w, p = wp.tid()
+        work[w, p] += wp.abs(sensordata[w, force_adr[p]] * sensordata[w, velocity_adr[p]]) * dt
+
+    @wp.kernel
+    def record(
+        qpos: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        substep: int,
+        path: wp.array3d(dtype=float),  # type: ignore[valid-type]
+    ) -> None:
+        w, j = wp.tid()
+        path[substep, w, j] = qpos[w, j]
+
+    _KERNELS.update(meter=meter, record=record)
+    return _KERNELS
+
+
+class WarpStepper:
+    """Advances several AUVPhysics of one config together on MuJoCo Warp; `step` has the
+    contract of `physics.Stepper.step`.
+
+    Args:
+        device: "cuda", "cuda:N" or "cpu"; None takes a GPU when there is one.
+        graph: capture the substep loop as a CUDA graph (GPU only).
+    """
+
+    def __init__(self, device: str | None = None, graph: bool = True):
+        self.wp, self.mjw = _import_warp()
+        self.wp.init()
+        self.device = device or default_device()
+        self.use_graph = graph and self.device.startswith("cuda")
+        self._shape: tuple[int, int] = (0, 0)
+        self._graph: Any = None
+        self.recorded = None  # the C Stepper's benchmark hook; not kept here
+
+    def _build(self, physics: Sequence[Any], nstep: int) -> None:
+        wp, mjw = self.wp, self.mjw
+        p0, b = physics[0], len(physics)
+        mjm = p0.model.ptr
+        pairs = p0._power_sensors.reshape(-1, 2)  # (N * 2 actuators, force/velocity)
+        with wp.ScopedDevice(self.device):
+            self.model = mjw.put_model(mjm)
+            self.data = mjw.make_data(mjm, nworld=b)
+            self.wind = wp.zeros(b, dtype=wp.vec3)
+            self.model.opt.wind = self.wind  # one current per world
+            self.force_adr = wp.array(pairs[:, 0].astype(np.int32), dtype=int)
+            self.velocity_adr = wp.array(pairs[:, 1].astype(np.int32), dtype=int)
+            # the joint limits (the arena's walls) move with each world's re-based origin
+            self.base_range = np.tile(mjm.jnt_range, (b, 1, 1))
+            self.jnt_range = wp.array(self.base_range.astype(np.float32), dtype=wp.vec2)
+            self.model.jnt_range = self.jnt_range
+            self.work = wp.zeros((b, len(pairs)), dtype=float)
+            self.path = wp.zeros((nstep, b, mjm.nq), dtype=float)
+        self._shape, self._graph = (b, nstep), None
+        self._xy = np.concatenate([p0._qx, p0._qy])
+        self._joint_qpos = mjm.jnt_qposadr.copy()  # slide and hinge joints: one entry each
+        self.dt_s = float(mjm.opt.timestep)
+
+    def _substeps(self, nstep: int) -> None:
+        wp, k = self.wp, _kernels()
+        b, nq = self._shape[0], self.path.shape[2]
+        for s in range(nstep):
+            self.mjw.step(self.model, self.data)
+            wp.launch(
+                k["meter"],
+                dim=(b, self.work.shape[1]),
+                inputs=[self.data.sensordata, self.force_adr, self.velocity_adr, self.dt_s],
+                outputs=[self.work],
+            )
+            wp.launch(k["record"], dim=(b, nq), inputs=[self.data.qpos, s], outputs=[self.path])
+
+    def _run(self, nstep: int) -> None:
+        wp = self.wp
+        if not self.use_graph:
+            self._substeps(nstep)
+            return
+        if self._graph is None:
+            with wp.ScopedDevice(self.device), wp.ScopedCapture() as capture:
+                self._substeps(nstep)
+            self._graph = capture.graph
+        wp.capture_launch(self._graph)
+
+    def step(self, physics: Sequence[Any], nstep: int) -> BoolArray:
+        """Advance every physics `nstep` substeps; returns which of them diverged (not
+        finite at the end of the slot)."""
+        if self._shape != (len(physics), nstep):
+            self._build(physics, nstep)
+        wp = self.wp
+        qpos = np.stack([p.data.ptr.qpos for p in physics])
+        offset = np.zeros_like(qpos)
+        offset[:, self._xy] = qpos[:, self._xy]
+        with wp.ScopedDevice(self.device):
+            self.data.qpos.assign((qpos - offset).astype(np.float32))
+            self.data.qvel.assign(np.stack([p.data.ptr.qvel for p in physics]).astype(np.float32))
+            self.data.ctrl.assign(np.stack([p.data.ptr.ctrl for p in physics]).astype(np.float32))
+            self.data.qacc_warmstart.zero_()
+            self.wind.assign(np.stack([p.model.ptr.opt.wind for p in physics]).astype(np.float32))
+            shift = offset[:, self._joint_qpos][..., None]
+            self.jnt_range.assign((self.base_range - shift).astype(np.float32))
+            self.work.zero_()
+            self._run(nstep)
+            wp.synchronize_device(self.device)
+            end_qpos = self.data.qpos.numpy().astype(np.float64) + offset
+            end_qvel = self.data.qvel.numpy().astype(np.float64)
+            path = self.path.numpy().astype(np.float64) + offset[None]
+            work = self.work.numpy().astype(np.float64).reshape(len(physics), -1, 2)
+        diverged = ~(np.isfinite(end_qpos).all(axis=1) & np.isfinite(end_qvel).all(axis=1))
+        for i, p in enumerate(physics):
+            d = p.data.ptr
+            d.qpos[:], d.qvel[:] = end_qpos[i], end_qvel[i]
+            d.time += nstep * self.dt_s
+            p.mech_energy_j += work[i]
+            p.substep_qpos = path[:, i]
+        return diverged
+
+    def close(self) -> None:
+        self._graph = None
