@@ -222,6 +222,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="also write the JSON to this file")
     p.add_argument("--markdown", action="store_true", help="the README's table")
     p.add_argument("--from-json", help="format a saved run instead of measuring")
+    p.add_argument(
+        "--warp",
+        action="store_true",
+        help="only the warp backend's benchmark (MuJoCo Warp on the GPU it finds, else CPU)",
+    )
+    p.add_argument(
+        "--warp-sizes",
+        type=int_at_least(1),
+        nargs="+",
+        help="batch sizes B of --warp (default: 256 1024 4096 16384 on a GPU, 4 16 on a CPU)",
+    )
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("figures", help="the paper's figures from saved results", **fmt)

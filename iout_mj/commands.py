@@ -212,6 +212,15 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     if args.out:
         writable_dir(Path(args.out).parent)
+    if args.warp:
+        from iout_mj.experiments import bench_warp
+
+        say = lambda stage: print(f"bench: {stage} ...", file=sys.stderr)  # noqa: E731
+        warp = bench_warp.run(args.warp_sizes, say=say)
+        if args.out:
+            Path(args.out).write_text(json.dumps(warp, indent=2) + "\n")
+        print(json.dumps(warp, indent=2) if args.json else bench_warp.format_table(warp))
+        return 0
     if args.from_json:
         path = Path(args.from_json)
         if not path.is_file():

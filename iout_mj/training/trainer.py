@@ -45,12 +45,13 @@ HELD_OUT_SEED = 1_000_000
 
 
 def scenario_env(cfg: TrainConfig, backend: str) -> Any:
-    """The gymnasium env of the config's scenario."""
+    """The gymnasium env of the config's scenario (the warp backend's scenes are evaluated on
+    C MuJoCo: the same physics, one env)."""
     return gym.make(
         ENV_ID,
         n_auvs=cfg.n_auvs,
         n_nodes=cfg.n_nodes,
-        backend=backend,
+        backend="mujoco" if backend == "warp" else backend,
         layout=cfg.layout,
         config=cfg.env,
     )
@@ -125,8 +126,10 @@ def selection_score(metrics: dict[str, float]) -> float:
     return -metrics["mean_aoi_horizon"] - 100.0 * max(0.0, 0.95 - metrics["docking_rate"])
 
 
-def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> Any:
-    """A fresh PPO with the config's hyperparameters on `venv`."""
+def new_model(
+    cfg: TrainConfig, venv: Any, tensorboard: Path | None = None, device: str = "cpu"
+) -> Any:
+    """A fresh PPO with the config's hyperparameters on `venv` (torch on `device`)."""
     if cfg.policy == "tokens":
         policy: Any = TokenPolicy
         kwargs: dict[str, Any] = {"k_max": K_MAX, "width": cfg.width}
@@ -144,7 +147,7 @@ def new_model(cfg: TrainConfig, venv: Any, tensorboard: Path | None = None) -> A
         clip_range=cfg.clip_range,
         ent_coef=cfg.ent_coef,
         seed=cfg.seed,
-        device="cpu",
+        device=device,
         verbose=0,
         policy_kwargs=kwargs,
         tensorboard_log=None if tensorboard is None else str(tensorboard),
