@@ -198,6 +198,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_at_least(0),
         help="training seed instead of the config's (default run folder runs/<name>-seed<S>)",
     )
+    p.add_argument(
+        "--layout", choices=LAYOUTS, help="node layout instead of the config's (paper: K 7, 13)"
+    )
+    p.add_argument(
+        "--env-config",
+        help="YAML/JSON env config instead of the config's env: (current, noise, reward, ...)",
+    )
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser(

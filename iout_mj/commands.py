@@ -175,6 +175,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     name = cfg.name
     if args.seed is not None:
         cfg, name = dataclasses.replace(cfg, seed=args.seed), f"{cfg.name}-seed{args.seed}"
+    if args.layout is not None:
+        cfg = dataclasses.replace(cfg, layout=args.layout)
+    if args.env_config is not None:
+        cfg = dataclasses.replace(cfg, env=load_config(args.env_config))
     out = writable_dir(Path(args.out or f"runs/{name}"))
     state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
     summary = {

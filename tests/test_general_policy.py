@@ -133,7 +133,21 @@ def test_general_training_config_round_trips_and_rejects_bad_values(tmp_path):
 @pytest.mark.slow
 def test_general_pipeline_trains_saves_and_flies_any_k(tmp_path, cli):
     out = tmp_path / "run"
-    cli("train", "--config", ROOT / "training/configs/smoke-general.yaml", "--out", out)
+    env_config = ROOT / "training/configs/env/wenz-current.yaml"
+    cli(
+        "train",
+        "--config",
+        ROOT / "training/configs/smoke-general.yaml",
+        "--out",
+        out,
+        "--env-config",
+        env_config,
+        "--layout",
+        "random",
+    )
+    trained = TrainConfig.load(out / "config.yaml")
+    assert trained.env.physics.current_jitter_mps == 0.5
+    assert trained.env.acoustics.noise_model == "wenz" and trained.layout == "random"
     manifest = json.loads((out / "best" / "policy.json").read_text())
     assert manifest["policy"] == "tokens" and manifest["k_max"] == K_MAX
     # phase 0 starts from the DAgger checkpoint at step 0
