@@ -220,3 +220,11 @@ def test_rl_zoo3_trains_with_the_shipped_hyperparameters(tmp_path):
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert list(tmp_path.glob("ppo/iout_mj-MultiAUV-v0_1/*.zip"))
+
+
+def test_ppo_trains_on_the_warp_backend_through_the_training_config(tmp_path):
+    pytest.importorskip("mujoco_warp")
+    cfg = small(phases=(PhaseConfig("warp", 16),), n_steps=8, batch_size=16, eval_every_steps=16)
+    state = train(cfg, tmp_path / "run", progress=False)
+    assert state.num_timesteps == 16 and state.history[-1]["backend"] == "warp"
+    assert (tmp_path / "run" / "best" / "policy.json").is_file()

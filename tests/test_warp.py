@@ -9,7 +9,6 @@ pytest.importorskip("mujoco_warp")
 
 from iout_mj.backends.mujoco.warp_stepper import WarpStepper
 from iout_mj.envs.batch import MissionBatch
-from iout_mj.training.config import PhaseConfig
 
 CONFIG = {"physics": {"current_jitter_mps": 0.5}}
 WORLDS = 8
@@ -86,22 +85,3 @@ def test_warp_backend_is_refused_clearly_without_mujoco_warp(monkeypatch):
     with pytest.raises(ImportError, match=r"iout-mj\[gpu\]"):
         WarpStepper()
 
-
-@pytest.mark.slow
-def test_ppo_trains_on_the_warp_backend_through_the_training_config(tmp_path):
-    from iout_mj.training import TrainConfig, train
-
-    cfg = TrainConfig(
-        name="warp-smoke",
-        n_auvs=1,
-        phases=(PhaseConfig(backend="warp", timesteps=16),),
-        n_envs=2,
-        n_steps=8,
-        batch_size=16,
-        n_epochs=1,
-        eval_every_steps=16,
-        eval_episodes=1,
-    )
-    state = train(cfg, tmp_path / "run", progress=False)
-    assert state.num_timesteps == 16 and state.history[-1]["backend"] == "warp"
-    assert (tmp_path / "run" / "best" / "policy.json").is_file()
