@@ -50,7 +50,11 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def _policy_help() -> str:
-    return f"{', '.join(POLICIES)}, a shipped policy ({', '.join(shipped_policies())}) or a folder"
+    shipped = ", ".join(shipped_policies())
+    return (
+        f"{', '.join(POLICIES)}, a shipped policy ({shipped}; ppo-general picks "
+        "ppo-general-n<N> for the env's N) or a folder"
+    )
 
 
 def _trust_pickle(p: argparse.ArgumentParser) -> None:
