@@ -84,4 +84,3 @@ def test_warp_backend_is_refused_clearly_without_mujoco_warp(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_warp)
     with pytest.raises(ImportError, match=r"iout-mj\[gpu\]"):
         WarpStepper()
-
