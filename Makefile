@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/iout-mj render --policy ppo-n2-k7 --width 960 --height 540 --out renders/mission.mp4
+	$(BIN)/iout-mj render --policy ppo-general --width 960 --height 540 --out renders/mission.mp4
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
