@@ -154,7 +154,7 @@ def test_shipped_policies_load_and_refuse_other_scenarios():
     assert "ppo-n1-k7" in shipped and all(
         (SHIPPED_DIR / n / "policy.json").is_file() for n in shipped
     )
-    for name in shipped:
+    for name in (s for s in shipped if s.endswith("-k7")):  # the specialists (general: elsewhere)
         n = int(name.split("-")[1][1:])
         env = gym.make(ENV_ID, backend="kinematic", n_auvs=n, n_nodes=7)
         policy = load_policy(name, env)
