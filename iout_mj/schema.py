@@ -94,10 +94,10 @@ def _convert(tp: Any, value: Any, name: str) -> Any:
             _convert(a, v, f"{name}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if len(args) != 1 or len(typing.get_args(tp)) != 2:
+        present = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(present) != 1 or len(typing.get_args(tp)) != 2:
             raise ConfigError(f"{name}: only optional (X | None) unions are supported in configs")
-        return None if value is None else _convert(args[0], value, name)
+        return None if value is None else _convert(present[0], value, name)
     if tp is float:
         if isinstance(value, str) and _is_number_text(value):
             raise ConfigError(

@@ -51,6 +51,7 @@ class TokenNet(nn.Module):
         self.latent_dim_pi = n_auvs * (heading_levels + speed_levels + 2 * k_max)
         self.latent_dim_vf = width
         for head in (self.motion[-1], self.queries):  # near-uniform first actions
+            assert isinstance(head, nn.Linear)
             nn.init.orthogonal_(head.weight, gain=0.01)
             nn.init.zeros_(head.bias)
 

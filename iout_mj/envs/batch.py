@@ -83,7 +83,7 @@ class MissionBatch:
         self.mission = Mission(self.cfg, layout == "random", n_envs=self.n_envs)
         self.random = np.random.RandomState(seed)
         self.physics: list[AUVPhysics] = []
-        self.stepper: Stepper | None = None
+        self.stepper: Stepper | WarpStepper | None = None
         if backend in ("mujoco", "warp"):
             self.physics = [AUVPhysics.from_config(self.cfg) for _ in range(self.n_envs)]
             self.substeps = substeps_per_slot(self.cfg, self.physics[0].dt_s)

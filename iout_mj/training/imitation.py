@@ -103,7 +103,7 @@ def fit(
     learning_rate: float = 1e-3,
     rng: np.random.RandomState | None = None,
     batch_size: int = 256,
-) -> tuple[float, float, RunningMeanStd]:
+) -> tuple[list[float], float, RunningMeanStd]:
     """Train the SB3 policy on the demonstrations; returns the accuracy of its most likely
     action per field (heading, speed, AET node, uplink node), the last negative
     log-likelihood and the return statistics."""

@@ -216,7 +216,7 @@ def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path) -> Any:
     norm_obs = cfg.policy == "mlp"
     normalized = VecNormalize(venv, norm_obs=norm_obs, norm_reward=True, gamma=cfg.gamma)
     if not norm_obs:  # the identity transform, saved with the policy like any statistics
-        normalized.obs_rms = RunningMeanStd(shape=venv.observation_space.shape)
+        normalized.obs_rms = RunningMeanStd(shape=venv.observation_space.shape)  # type: ignore[assignment]
     if model is None:
         return new_model(cfg, normalized, out / "tb")
     stats = model.get_vec_normalize_env()

@@ -30,7 +30,7 @@ def _import_warp() -> tuple[Any, Any]:
         import warp as wp
     except ImportError as exc:
         raise ImportError(f"backend 'warp' needs MuJoCo Warp: {GPU_EXTRA} ({exc})") from exc
-    wp.config.quiet = True
+    wp.config.quiet = True  # type: ignore[attr-defined]
     return wp, mjw
 
 
