@@ -98,6 +98,12 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
     return np.where(best >= 0, best, cheapest).astype(np.int64)
 
 
+def _dock_turn_rad(mission: Mission) -> FloatArray:
+    """How far each AUV's heading setpoint is from the bearing to the dock (0 to pi)."""
+    delta = mission.dock_m - mission.state.positions_m
+    return np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - mission.state.heading_sp))
+
+
 def _tour_order(start_m: FloatArray, nodes_m: FloatArray) -> list[int]:
     """Nearest-neighbour order of the nodes from a start point."""
     left, here, order = set(range(len(nodes_m))), start_m, []
@@ -164,7 +170,7 @@ class TourScheduler:
         left, with one to spare."""
         s, m, slot_s = mission.state, mission.cfg.motion, mission.cfg.scenario.slot_s
         delta = mission.dock_m - s.positions_m
-        turn = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - s.heading_sp))
+        turn = _dock_turn_rad(mission)
         turn_slots = np.ceil(turn / np.radians(m.dtheta_max_deg))
         final = self._final_speed(mission)
         slow_slots = np.maximum(s.speed_sp - final, 0) / m.dv_max_mps
@@ -207,9 +213,7 @@ class TourScheduler:
         final = self._final_speed(mission)
         dock_speed = np.clip(approach_speed(s.dock_dist_m, slot_s), final, final + 1.0)
         # facing away from a near dock: turn slowly, on a circle that fits the dock zone
-        delta = mission.dock_m - s.positions_m
-        away = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - s.heading_sp))
-        tight = (away > 2 * np.radians(mission.cfg.motion.dtheta_max_deg)) & (
+        tight = (_dock_turn_rad(mission) > 2 * np.radians(mission.cfg.motion.dtheta_max_deg)) & (
             s.dock_dist_m < FINAL_STRETCH_M
         )
         dock_speed = np.where(tight, max(0.8, final - FINAL_APPROACH_MPS + 0.3), dock_speed)

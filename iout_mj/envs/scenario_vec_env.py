@@ -58,16 +58,17 @@ class ScenarioVecEnv(MissionVecEnv):
         self.cells = [(k, cfg) for k, cfg in cells]
         self.batch = self.batches[0]  # the RNG holder (`random`, `set_random_state`)
         self.cfg, self.mission = self.batch.cfg, self.batch.mission
-        self.set_random_state(np.random.RandomState(seed))
         self.render_mode = None
         self._bounds = np.cumsum([0] + [b.n_envs for b in self.batches])
         gym_obs, gym_act = token_spaces(self.cfg)
         super(MissionVecEnv, self).__init__(int(self._bounds[-1]), gym_obs, gym_act)
+        self.set_random_state(np.random.RandomState(seed))
 
     def set_random_state(self, rng: np.random.RandomState) -> None:
+        """One RNG for every cell (layouts and currents are drawn from it)."""
         for b in self.batches:
             b.random = rng
-        self._reset_seeds() if hasattr(self, "_seeds") else None
+        self._reset_seeds()
 
     def reset(self) -> VecEnvObs:
         seed = self._seeds[0]
