@@ -3,6 +3,9 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# The compiled mission rules (iout_mj/_native*.so): rebuilt when a C source changes.
+NATIVE := $(VENV)/.native
+NATIVE_SOURCES := iout_mj/native.h $(wildcard iout_mj/*/*.c)
 # The CPU build of torch that lies on these machines' disk; an unpinned torch pulls CUDA (GBs).
 TORCH := torch==2.13.0
 
@@ -15,19 +18,23 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet $(TORCH)
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
-	touch $(STAMP)
+	touch $(STAMP) $(NATIVE)
 
-run: $(STAMP)
+$(NATIVE): $(STAMP) $(NATIVE_SOURCES)
+	$(BIN)/python -m pip install --quiet --no-deps -e .
+	touch $(NATIVE)
+
+run: $(NATIVE)
 	$(BIN)/iout-mj render --policy ppo-general --width 960 --height 540 --out renders/mission.mp4
 
-test: $(STAMP)
+test: $(NATIVE)
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
 	$(BIN)/ruff check iout_mj tests training benchmarks
 	$(BIN)/mypy
 
-bench: $(STAMP)
+bench: $(NATIVE)
 	$(BIN)/iout-mj bench
 
 clean:

@@ -106,7 +106,10 @@ def test_bench_formats_the_saved_run_as_the_readme_table():
     saved_run = ROOT / "benchmarks" / "results-2cpu.json"
     out = run("bench", "--from-json", str(saved_run), "--markdown").stdout
     kin = json.loads(saved_run.read_text())["kinematic_steps_per_s"]["N2_K13"]
-    assert f"| kinematic_steps_per_s N2_K13, KinematicVecEnv of 64 [one env] | {kin:,.0f}" in out
+    assert (
+        f"| kinematic_steps_per_s N2_K13, KinematicVecEnv of 64 [one env, gym.make] | {kin:,.0f}"
+        in out
+    )
     assert out in (ROOT / "README.md").read_text()  # the README shows this very run
     bad = run("bench", "--from-json", "missing.json", check=False)
     assert bad.returncode == 2 and "missing.json" in bad.stderr

@@ -52,7 +52,15 @@ def test_batched_tokens_equal_single_env_tokens():
         m, b = env.mission, batch.mission
         for f in dataclasses.fields(m.state):
             getattr(m.state, f.name)[...] = getattr(b.state, f.name)[e]
-        for name in ("nodes_m", "energy_j", "aoi", "service_count"):
+        for name in (
+            "nodes_m",
+            "energy_j",
+            "aoi",
+            "service_count",
+            "deliveries",
+            "mean_aoi",
+            "jain",
+        ):
             getattr(m.network, name)[...] = getattr(b.network, name)[e]
         np.testing.assert_array_equal(observe_tokens(m), step.obs[e])
 

@@ -11,7 +11,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from iout_mj.backends.kinematic import move
 from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
 from iout_mj.mission import ActionError, Mission
-from iout_mj.mission.stats import unserved_aoi_sum
+from iout_mj.mission.rules import unserved_aoi_sum
 
 
 def docked_start(cfg):
@@ -152,7 +152,8 @@ def test_aoi_booked_after_an_early_end_matches_slot_by_slot_ageing(cfg):
             ages = np.minimum(ages + 1, a_max)
             total += ages.mean()
         expected.append(total)
-    np.testing.assert_allclose(unserved_aoi_sum(cfg, m.state.slot, m.network.aoi), expected)
+    booked = [unserved_aoi_sum(m.params, m.state.slot[e], m.network.aoi[e]) for e in range(3)]
+    np.testing.assert_allclose(booked, expected)
 
 
 def test_physics_batch_places_each_envs_own_layout_and_current(cfg):

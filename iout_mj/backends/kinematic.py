@@ -3,9 +3,11 @@
 Same spaces, mission rules, reward and metrics as the MuJoCo task (`iout_mj.mission.Mission`);
 the vehicles jump to p + v_sp * slot * (cos theta_sp, sin theta_sp) + current * slot each
 slot, a move that would end outside the area is rejected (the AUV stays), and propulsion
-energy is `propulsion.travel_energy_j` (the hotel load is booked by the mission).
-`move` works on one environment or on a batch; `KinematicEnvironment` is the dm_env of one,
-`iout_mj.envs.KinematicVecEnv` steps B of them per call.
+energy is the cubic drag term for the distance flown through the water (the hotel load is
+booked by the mission). `move` runs the whole slot, the mission's rules included, as one
+compiled call (`kinematic.c`), for one environment or a batch; `KinematicEnvironment` is the
+dm_env of one, `iout_mj.envs.KinematicVecEnv` steps B of them per call. Separations are
+checked at 5 points along each straight move.
 """
 
 from __future__ import annotations
@@ -16,13 +18,9 @@ import dm_env
 import numpy as np
 from dm_env import specs
 
+from iout_mj import native
 from iout_mj.config import Config
 from iout_mj.mission import Mission
-from iout_mj.world import propulsion
-from iout_mj.world.geometry import norm_xy, wrap_angle
-
-PATH_FRACTIONS = np.linspace(0.0, 1.0, 6)[1:]
-"""Points along each straight slot move (fractions of it) at which separations are checked."""
 
 
 def move(m: Mission, action: Any) -> Any:
@@ -31,24 +29,9 @@ def move(m: Mission, action: Any) -> Any:
     Each AUV flies its setpoints through the water and drifts with the ocean current (as the
     physics does); a move that would end outside the area is rejected (the AUV stays).
     Propulsion energy is the paper's, for the distance flown through the water."""
-    s = m.state
-    start = s.positions_m.copy()
-    heading, speed = m.begin_slot(action)
-    drift = np.where(s.docked[..., None], 0.0, s.current_mps[..., None, :] * m.cfg.scenario.slot_s)
-    end = s.straight_end_m + drift
-    rejected = s.boundary_attempt | ((end < 0) | (end > m.area_m)).any(axis=-1)
-    end = np.where(rejected[..., None], start, end)
-    through_water_m = np.where(rejected, 0.0, norm_xy(s.straight_end_m - start))
-    prop = propulsion.travel_energy_j(speed, through_water_m, m.cfg.motion)
-    fraction = PATH_FRACTIONS.reshape(-1, *[1] * end.ndim)
-    return m.end_slot(
-        end,
-        wrap_angle(heading),
-        speed,
-        prop,
-        np.zeros_like(prop),
-        start + fraction * (end - start),
-    )
+    m.set_actions(action)
+    native.lib.iout_kinematic_slot(m.view_address)
+    return m.state.reward[()]
 
 
 class KinematicEnvironment(dm_env.Environment):

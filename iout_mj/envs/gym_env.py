@@ -9,12 +9,11 @@ import numpy as np
 from dm_control.rl.control import PhysicsError
 from gymnasium.utils import EzPickle
 
-from iout_mj.backends.kinematic import KinematicEnvironment
+from iout_mj.backends.kinematic import KinematicEnvironment, move
 from iout_mj.backends.mujoco import vehicle
 from iout_mj.backends.mujoco.render import MissionRenderer
 from iout_mj.backends.mujoco.task import make_environment
 from iout_mj.mission import OBS_HIGH, OBS_LOW, OBSERVATION_DOC, REWARD_TERMS, Mission
-from iout_mj.mission.observation import flatten_observation
 from iout_mj.scenarios import ConfigLike, resolve_config
 
 ENV_ID = "iout_mj/MultiAUV-v0"
@@ -142,9 +141,9 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         if seed is not None:
             target = self._env.task if self.backend == "mujoco" else self._env
             target.reseed(seed)
-        ts = self._env.reset()
+        self._env.reset()
         self._needs_reset = False
-        self._last_obs = flatten_observation(ts.observation)
+        self._last_obs = self.mission.flat_observation()
         if self.render_mode is not None:
             self.renderer.reset()
             if self.render_mode == "rgb_array_list":
@@ -157,26 +156,28 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
                 "step() before reset() or after the episode ended: call reset() first"
             )
         mission = self.mission
-        try:
-            ts = self._env.step(action)
-        except PhysicsError as exc:
-            return self._failed(str(exc))
-        obs = flatten_observation(ts.observation)
-        if not np.all(np.isfinite(obs)):
-            return self._failed("non-finite observation (diverged state)")
+        if self.backend == "kinematic":  # the lean path: one compiled call, no dm_env
+            reward = float(move(mission, action))
+            obs = mission.flat_observation()
+        else:
+            try:
+                reward = float(self._env.step(action).reward)
+            except PhysicsError as exc:
+                return self._failed(str(exc))
+            obs = mission.flat_observation()
+            if not np.all(np.isfinite(obs)):
+                return self._failed("non-finite observation (diverged state)")
         self._last_obs = obs
-        terminated = bool(ts.last() and ts.discount == 0.0)
-        truncated = bool(ts.last() and not terminated)
+        terminated, truncated = bool(mission.state.terminated), bool(mission.state.truncated)
         self._needs_reset = terminated or truncated
-        terms = {k: float(v) for k, v in mission.terms.items()}
-        info = {"reward_terms": terms, "slot": int(mission.state.slot)}
-        if ts.last():
+        info = {"reward_terms": mission.terms, "slot": int(mission.state.slot)}
+        if self._needs_reset:
             info["metrics"] = mission.metrics()
         if self.render_mode == "rgb_array_list":
             self.renderer.record_slot()
         elif self._renderer is not None:  # rgb_array: trails only, nobody takes slot frames
             self._renderer.record_slot(keep_frames=False)
-        return obs.copy(), float(ts.reward), terminated, truncated, info
+        return obs.copy(), reward, terminated, truncated, info
 
     def _failed(self, error: str) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """The step of a diverged physics: the episode ends, the error is reported."""

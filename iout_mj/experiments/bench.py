@@ -8,13 +8,14 @@ import platform
 from collections.abc import Callable
 from typing import Any
 
+import gymnasium as gym
 import mujoco
 import numpy as np
 
 from iout_mj.backends.mujoco.physics import Stepper
 from iout_mj.backends.mujoco.task import substeps_per_slot
 from iout_mj.config import Config
-from iout_mj.envs import KinematicVecEnv, MultiAUVEnv, PhysicsVecEnv
+from iout_mj.envs import ENV_ID, KinematicVecEnv, MultiAUVEnv, PhysicsVecEnv
 from iout_mj.experiments.bench_training import (
     PHYSICS_BATCH,
     REPEATS,
@@ -131,9 +132,10 @@ KINEMATIC_BATCH = 64
 
 
 def kinematic_rate(n: int, k: int, steps: int = 3000) -> dict[str, float]:
-    """Kinematic env steps/s on one core: one env through the gymnasium API, and a batch of
-    `KINEMATIC_BATCH` envs through `KinematicVecEnv` (the backend PPO trains on)."""
-    single = _env_rate(_env("kinematic", n, k), steps)
+    """Kinematic env steps/s on one core: one env through `gymnasium.make` (its wrappers
+    included), and a batch of `KINEMATIC_BATCH` envs through `KinematicVecEnv` (the backend PPO
+    trains on)."""
+    single = _env_rate(gym.make(ENV_ID, backend="kinematic", config=fixed_config(n, k)), steps)
     venv = KinematicVecEnv(KINEMATIC_BATCH, config=fixed_config(n, k), seed=0)
     actions = _random_actions(venv.action_space, 16, (KINEMATIC_BATCH,))
     calls = max(steps // KINEMATIC_BATCH, 20)

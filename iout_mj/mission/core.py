@@ -1,10 +1,11 @@
 """The mission: the paper's rules on top of the motion, for one environment or a batch.
 
 A backend (the MuJoCo task or the kinematic model) only moves the vehicles and measures their
-energy; everything the paper defines on top of the motion happens here, so every backend
-computes AoI, harvest, reward and metrics the same way. One `Mission` holds one environment
-(`n_envs=None`: arrays (N, ...)) or B environments stepped together (`n_envs=B`: every array
-gains a leading axis of B); the same code serves both.
+energy; everything the paper defines on top of the motion happens in the compiled rules
+(`mission.rules`), so every backend computes AoI, harvest, reward and metrics with the same
+code. One `Mission` holds one environment (`n_envs=None`: arrays (N, ...)) or B environments
+stepped together (`n_envs=B`: every array gains a leading axis of B); the rules see both as a
+batch (one env: of one).
 
 A slot: `begin_slot(action)` sets the setpoints, the backend moves the vehicles, then
 `end_slot(...)` books the measured motion and energy, steps the sensor network, and computes
@@ -17,33 +18,30 @@ backend).
 
 from __future__ import annotations
 
+import ctypes
 from typing import Any
 
 import numpy as np
 
+from iout_mj import native
 from iout_mj.config import Config
-from iout_mj.mission import stats
+from iout_mj.mission import rules, stats
 from iout_mj.mission.actions import ActionMap
-from iout_mj.mission.observation import flatten_observation, observation_sizes, observe
-from iout_mj.mission.rewards import REWARD_TERMS, SlotContext, reward_terms
-from iout_mj.mission.state import MissionState
+from iout_mj.mission.observation import observation_sizes, split_observation
+from iout_mj.mission.rewards import REWARD_TERMS
+from iout_mj.mission.state import MissionLog, MissionState
 from iout_mj.scenarios import random_layout
 from iout_mj.types import BoolArray, FloatArray
-from iout_mj.world import propulsion
-from iout_mj.world.geometry import norm_xy, pairwise_distance_m
-from iout_mj.world.network import SensorNetwork, SlotOutcome, rows
+from iout_mj.world.network import SensorNetwork, rows
 
 
 class Mission:
-    """State and rules of one multi-AUV data-collection episode, or of B of them at once.
-
-    Longer than most classes here because `end_slot` is one ordered sequence (energy, network,
-    docking, termination, reward, statistics) whose every rule lives in the module it calls.
-    """
+    """State and rules of one multi-AUV data-collection episode, or of B of them at once."""
 
     cfg: Config
     state: MissionState
     network: SensorNetwork
+    log: MissionLog
     inv_area: FloatArray
     inv_diag: float
 
@@ -62,14 +60,65 @@ class Mission:
         self.actions = ActionMap(cfg, self.batch)
         self.network = SensorNetwork(sc.nodes_m, cfg.network, cfg.acoustics, self.batch)
         self.state = MissionState.zeros(self.batch, self.n_auvs, self.n_nodes)
-        self.terms: dict[str, Any] = dict.fromkeys(REWARD_TERMS, np.zeros(self.batch))
-        """The last slot's reward terms (arrays over the batch)."""
-        self.outcome: SlotOutcome | None = None
-        self.log = stats.MissionLog()
+        self.log = MissionLog.zeros(self.batch, self.n_auvs, sc.horizon_slots)
+        """Per-slot history of the episode (`MissionLog`)."""
+        self.params = rules.params(cfg)
+        """The config's constants for the rules, a (1,) record of `rules.PARAMS_DTYPE`."""
+        self.term_values = np.zeros((*(self.batch or (1,)), len(REWARD_TERMS)))
+        """The last slot's reward terms, (B, terms) in the order of REWARD_TERMS."""
+        self._bind()
+
+    def _bind(self) -> None:
+        """The rules' view of this mission: the arrays with a batch axis, the slot's inputs,
+        and the C struct of pointers (rebuilt after unpickling: it holds addresses)."""
+        b, n = self.batch or (1,), self.n_auvs
+        self.arrays = self.state.arrays(bool(self.batch))
+        """The state with a batch axis always (one env: of one), as the rules see it."""
+        self.log_arrays = self.log.arrays(bool(self.batch))
+        self.inputs: dict[str, np.ndarray] = {
+            "actions": np.zeros((*b, n, 4), dtype=np.int64),
+            "end_positions_m": np.zeros((*b, n, 2)),
+            **{k: np.zeros((*b, n)) for k in rules.INPUTS[2:6]},
+            "path_m": np.zeros((0, *b, n, 2)),
+            "terms": self.term_values,
+            "obs": np.zeros((*b, sum(self.observation_sizes.values()))),
+        }
+        """The slot's inputs and outputs that the rules share with Python (`rules.INPUTS`)."""
+        self.view = rules.MissionView(
+            n_envs=b[0], n_auvs=n, n_nodes=self.n_nodes, n_path=0, net=self.network.struct
+        )
+        for name, array in (
+            ("p", self.params),
+            ("link", self.network.link.constants),
+            ("dtheta_rad", self.actions.dtheta_rad),
+            ("dv_mps", self.actions.dv_mps),
+            *self.inputs.items(),
+        ):
+            setattr(self.view, name, native.address(array))
+        native.fill(self.view.s, self.arrays)
+        native.fill(self.view.log, self.log_arrays)
+        self.view_address = ctypes.addressof(self.view)
+        """The address of `view`, the one argument of the compiled slot functions."""
+        self._all_rows = np.ones(b, dtype=bool)
+
+    def __getstate__(self) -> dict[str, Any]:
+        derived = ("arrays", "log_arrays", "inputs", "view", "view_address", "_all_rows")
+        return {k: v for k, v in self.__dict__.items() if k not in derived}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._bind()
 
     @property
     def observation_sizes(self) -> dict[str, int]:
         return observation_sizes(self.n_auvs, self.n_nodes)
+
+    @property
+    def terms(self) -> dict[str, Any]:
+        """The last slot's reward terms by name (arrays over the batch; numbers for one env)."""
+        if self.batch:
+            return dict(zip(REWARD_TERMS, self.term_values.T, strict=True))
+        return dict(zip(REWARD_TERMS, self.term_values[0].tolist(), strict=True))
 
     # ------------------------------------------------------------------ episode
     def reset(self, rng: np.random.RandomState, mask: BoolArray | None = None) -> None:
@@ -105,22 +154,22 @@ class Mission:
         s.speed_sp[i] = cfg.motion.initial_speed_mps
         s.speeds_mps[i] = cfg.motion.initial_speed_mps
         s.battery_j[i] = cfg.motion.battery_j
-        s.distance_m[i] = pairwise_distance_m(start, self.network.nodes_m[i])
-        s.dock_dist_m[i] = norm_xy(start - self.dock_m)
-        s.deadline_slack_m[i] = self._deadline_slack_m(s.dock_dist_m, s.slot)[i]
         if mask is None:  # a partial reset keeps the last step's reward for the finished rows
             s.reward[...] = 0.0
-            self.terms = dict.fromkeys(REWARD_TERMS, np.zeros(self.batch))
-            self.outcome = None
-        if not self.batch:
-            self.log = stats.MissionLog()
-            self.log.record(s, self.network, None)
+            self.term_values[...] = 0.0
+        restarted = self._all_rows if mask is None else np.ascontiguousarray(mask, dtype=bool)
+        native.lib.iout_start(self.view_address, native.address(restarted))
 
     # ------------------------------------------------------------------ slot
     def begin_slot(self, action: Any) -> tuple[FloatArray, FloatArray]:
         """Apply an action: new heading (unwrapped) and speed setpoints for every AUV."""
-        self.actions.apply(self.state, self.actions.decode(action), self.area_m)
+        self.set_actions(action)
+        native.lib.iout_begin_slot(self.view_address)
         return self.state.heading_sp, self.state.speed_sp
+
+    def set_actions(self, action: Any) -> None:
+        """Validate an action (`ActionMap.decode`) and hand it to the rules."""
+        self.inputs["actions"].reshape(-1)[:] = self.actions.decode(action).reshape(-1)
 
     def end_slot(
         self,
@@ -141,83 +190,36 @@ class Mission:
             path_m: (S, *batch, N, 2) positions during the slot (MuJoCo: every substep), for
                 the separation metrics.
         """
-        cfg, sc, s, net = self.cfg, self.cfg.scenario, self.state, self.network
-        was_docked = s.docked.copy()
-        active = ~was_docked
-        moved_m = norm_xy(positions_m - s.positions_m)
-        s.positions_m[...] = positions_m
-        s.headings_rad[...] = headings_rad
-        s.speeds_mps[...] = speeds_mps
-        hotel_j = np.where(was_docked, 0.0, propulsion.hotel_energy_j(sc.slot_s, cfg.motion))
-        s.propulsion_energy_j += propulsion_energy_j + hotel_j
-        s.yaw_energy_j += yaw_energy_j
-        s.battery_j -= propulsion_energy_j + yaw_energy_j + hotel_j
-
-        out = net.step(positions_m, s.action[..., 2], s.action[..., 3], active)
-        self.outcome = out
-        s.distance_m[...] = out.distance_m
-        dock_dist = norm_xy(positions_m - self.dock_m)
-        s.docked |= dock_dist <= sc.dock_radius_m
-        all_docked = s.docked.all(axis=-1)
-        all_docked_first = all_docked & ~s.all_docked_paid
-        s.all_docked_paid |= all_docked
-        s.slot += 1
-        slack = self._deadline_slack_m(dock_dist, s.slot)
-        s.terminated[...] = all_docked | (s.battery_j <= 0).any(axis=-1)
-        s.truncated[...] = (s.slot >= sc.horizon_slots) & ~s.terminated
-        ending = s.terminated | s.truncated
-        s.aoi_after_mission[...] = (
-            np.where(ending, stats.unserved_aoi_sum(cfg, s.slot, net.aoi), 0.0)
-            if ending.any()
-            else 0.0
-        )
-        mean_aoi, jain = net.mean_aoi, net.jain
-        context = SlotContext(
-            active=active,
-            moved_m=moved_m,
-            boundary_attempt=s.boundary_attempt,
-            positions_m=positions_m,
-            docked=s.docked,
-            newly_docked=s.docked & active,
-            all_docked_first=all_docked_first,
-            dock_dist_before_m=s.dock_dist_m,
-            dock_dist_m=dock_dist,
-            slack_before_m=s.deadline_slack_m,
-            slack_m=slack,
-            mean_aoi=mean_aoi,
-            jain=jain,
-            deliveries=net.deliveries.sum(axis=-1),
-            uplink_stored_j=out.uplink_stored_j,
-            uplink_req_j=out.uplink_req_j,
-            ending=ending,
-            aoi_after_mission=s.aoi_after_mission,
-        )
-        self.terms = reward_terms(context, cfg.reward)
-        s.reward[...] = sum(self.terms.values())
-        s.deadline_slack_m[...] = slack
-        s.dock_dist_m[...] = dock_dist
-        s.sum_mean_aoi += mean_aoi
-        s.sum_objective += mean_aoi + cfg.reward.fairness_lambda * (1.0 - jain)
-        stats.book_separation(s, path_m, was_docked)
-        if not self.batch:
-            self.log.record(s, net, out.uplink_ok)
-        return s.reward[()]
-
-    def _deadline_slack_m(self, dock_dist_m: FloatArray, slot: Any) -> FloatArray:
-        """How much farther from the dock each undocked AUV is than it can fly at v_ref in the
-        time left (0 when on schedule or docked); its negative is the shaping potential."""
-        sc, r = self.cfg.scenario, self.cfg.reward
-        reach_m = r.deadline_speed_mps * (sc.horizon_slots - slot) * sc.slot_s
-        return np.where(self.state.docked, 0.0, np.maximum(0.0, dock_dist_m - reach_m[..., None]))
+        n, b, x = self.n_auvs, self.batch or (1,), self.inputs
+        path = np.asarray(path_m, dtype=float).reshape(len(path_m), *b, n, 2)
+        if path.shape != x["path_m"].shape:  # the backend's points per slot
+            x["path_m"] = np.zeros(path.shape)
+            self.view.path_m, self.view.n_path = native.address(x["path_m"]), len(path)
+        x["path_m"][...] = path
+        x["end_positions_m"][...] = np.reshape(positions_m, (*b, n, 2))
+        x["end_headings_rad"][...] = np.reshape(headings_rad, (*b, n))
+        x["end_speeds_mps"][...] = np.reshape(speeds_mps, (*b, n))
+        x["propulsion_energy_j"][...] = np.reshape(propulsion_energy_j, (*b, n))
+        x["yaw_energy_j"][...] = np.reshape(yaw_energy_j, (*b, n))
+        native.lib.iout_end_slot(self.view_address)
+        return self.state.reward[()]
 
     # ------------------------------------------------------------------ views
+    def observe(self) -> FloatArray:
+        """The flat observation of every environment, (B, D) float64 (one env: B = 1)."""
+        native.lib.iout_observe(self.view_address)
+        obs: FloatArray = self.inputs["obs"]
+        return obs
+
     def observation(self) -> dict[str, FloatArray]:
         """The observation groups, in their declared order (`mission.observation`)."""
-        return observe(self)
+        flat = self.observe() if self.batch else self.observe()[0]
+        return {k: v.copy() for k, v in split_observation(flat, self.n_auvs, self.n_nodes).items()}
 
     def flat_observation(self) -> np.ndarray:
-        """`observation()` concatenated in order, as float32 (*batch, D)."""
-        return flatten_observation(observe(self))
+        """The observation groups concatenated in order, as float32 (*batch, D)."""
+        flat = self.observe()
+        return flat.astype(np.float32) if self.batch else flat[0].astype(np.float32)
 
     def metrics(self, env: int | None = None) -> dict[str, Any]:
         """Episode metrics of one environment (`env` indexes the batch)."""
@@ -227,4 +229,4 @@ class Mission:
 
     def trace(self) -> dict[str, Any]:
         """The episode's path and service (one env)."""
-        return stats.trace(self.cfg, self.log, self.network)
+        return stats.trace(self.cfg, self.log, self.network, int(self.state.slot))

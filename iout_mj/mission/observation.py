@@ -2,22 +2,20 @@
 
 The paper's state is positions, headings, speeds, AoI, node energies and distances; docked,
 dock distance and remaining time are added because the docking deadline makes them part of
-the Markov state. `OBSERVATION_DOC` (the env's docstring and the README) is made from here.
+the Markov state. `OBSERVATION_DOC` (the env's docstring and the README) is made from here;
+the compiled `mission.rules.observe` writes the groups in this order.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from iout_mj import native
 from iout_mj.types import FloatArray
-from iout_mj.world.geometry import unit_xy
-
-if TYPE_CHECKING:  # the mission imports this module; only the annotation needs it
-    from iout_mj.mission.core import Mission
 
 OBS_LOW, OBS_HIGH = -1.0, 2.0
 """Bounds of every observation entry (node energy is clipped to the top)."""
@@ -25,10 +23,15 @@ ENERGY_OBS_REF_J = 1e-3
 """Node energies are observed as log10(1 + e / 1 mJ) / 5 (1 mJ is a typical uplink need)."""
 
 
-def node_energy_level(energy_j: FloatArray) -> FloatArray:
-    """The observed node energy, log10(1 + e / 1 mJ) / 5, clipped to OBS_HIGH (also the
-    renderer's node size)."""
-    return np.minimum(np.log10(1 + energy_j / ENERGY_OBS_REF_J) / 5, OBS_HIGH)
+def node_energy_level(energy_j: Any) -> FloatArray:
+    """The observed node energy, log10(1 + e / 1 mJ) / 5, clipped to OBS_HIGH, of each entry
+    (the compiled `iout_node_energy_level` of the observation; also the renderer's node size)."""
+    e = np.ascontiguousarray(energy_j, dtype=float)
+    out = np.empty_like(e)
+    native.lib.iout_node_energy_levels(
+        native.address(e), e.size, ENERGY_OBS_REF_J, OBS_HIGH, native.address(out)
+    )
+    return out
 
 
 @dataclass(frozen=True)
@@ -38,14 +41,8 @@ class ObservationGroup:
     """Entries in terms of N and K, as the docs write it."""
     size: Callable[[int, int], int]
     """Entries for (N, K)."""
-    value: Callable[[Mission], FloatArray]
-    """The group's entries, (*batch, size)."""
     doc: str
     bounds: str
-
-
-def _flat(m: Mission, x: FloatArray) -> FloatArray:
-    return x.reshape(*m.batch, -1)
 
 
 OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
@@ -53,7 +50,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "auv_position",
         "2N",
         lambda n, k: 2 * n,
-        lambda m: _flat(m, m.state.positions_m * m.inv_area),
         "(x, y) / area side",
         "[0, 1]",
     ),
@@ -61,7 +57,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "auv_heading",
         "2N",
         lambda n, k: 2 * n,
-        lambda m: _flat(m, unit_xy(m.state.headings_rad)),
         "(cos, sin) of the measured heading",
         "[-1, 1]",
     ),
@@ -69,7 +64,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "auv_speed",
         "N",
         lambda n, k: n,
-        lambda m: m.state.speeds_mps / m.cfg.motion.v_max_mps,
         "measured speed over ground / V_max",
         "[0, ~1]",
     ),
@@ -77,7 +71,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "docked",
         "N",
         lambda n, k: n,
-        lambda m: m.state.docked.astype(float),
         "1 once docked",
         "{0, 1}",
     ),
@@ -85,7 +78,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "aoi",
         "K",
         lambda n, k: k,
-        lambda m: m.network.aoi / m.cfg.network.aoi_max,
         "AoI / A_max",
         "(0, 1]",
     ),
@@ -93,7 +85,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "node_energy",
         "K",
         lambda n, k: k,
-        lambda m: node_energy_level(m.network.energy_j),
         "log10(1 + e / 1 mJ) / 5",
         "[0, ~1]",
     ),
@@ -101,7 +92,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "distance",
         "N*K",
         lambda n, k: n * k,
-        lambda m: _flat(m, m.state.distance_m * m.inv_diag),
         "AUV-node distance / area diagonal",
         "[0, 1]",
     ),
@@ -109,7 +99,6 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "dock_distance",
         "N",
         lambda n, k: n,
-        lambda m: m.state.dock_dist_m * m.inv_diag,
         "distance to dock centre / diagonal",
         "[0, 1]",
     ),
@@ -117,16 +106,20 @@ OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
         "time_remaining",
         "1",
         lambda n, k: 1,
-        lambda m: (1 - m.state.slot / m.cfg.scenario.horizon_slots)[..., None],
         "1 - slot / T_max",
         "[0, 1]",
     ),
 )
 
 
-def observe(mission: Mission) -> dict[str, FloatArray]:
-    """Every group of the observation, in order."""
-    return {g.name: g.value(mission) for g in OBSERVATION_LAYOUT}
+def split_observation(flat: FloatArray, n_auvs: int, n_nodes: int) -> dict[str, FloatArray]:
+    """A flat observation (..., D) as its groups, in order (views)."""
+    sizes = observation_sizes(n_auvs, n_nodes).values()
+    ends = np.cumsum(list(sizes))
+    return {
+        g.name: flat[..., end - size : end]
+        for g, size, end in zip(OBSERVATION_LAYOUT, sizes, ends, strict=True)
+    }
 
 
 def observation_sizes(n_auvs: int, n_nodes: int) -> dict[str, int]:

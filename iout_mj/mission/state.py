@@ -2,12 +2,15 @@
 
 Every array has the leading batch axes of the mission (`()` for one env, `(B,)` for B): per
 environment `(*batch,)`, per AUV `(*batch, N)`, and so on. State is updated in place, so that
-`reset_rows(mask)` restarts some environments of a batch and leaves the others alone.
+`reset_rows(mask)` restarts some environments of a batch and leaves the others alone, and so
+that `arrays()`, the same memory with a batch axis always (one env: of one), is what the
+compiled rules (`mission.rules`) write.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections import namedtuple
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -16,13 +19,19 @@ import numpy as np
 from iout_mj.types import BoolArray, FloatArray, IntArray
 
 SHAPES = {
-    "env": lambda n, k: (),
-    "env_xy": lambda n, k: (2,),
-    "auv": lambda n, k: (n,),
-    "auv_xy": lambda n, k: (n, 2),
-    "auv_action": lambda n, k: (n, 4),
-    "auv_node": lambda n, k: (n, k),
+    "env": lambda n, k, t: (),
+    "env_xy": lambda n, k, t: (2,),
+    "auv": lambda n, k, t: (n,),
+    "auv_xy": lambda n, k, t: (n, 2),
+    "auv_action": lambda n, k, t: (n, 4),
+    "auv_node": lambda n, k, t: (n, k),
+    "states": lambda n, k, t: (t + 1,),
+    "states_auv": lambda n, k, t: (t + 1, n),
+    "states_auv_xy": lambda n, k, t: (t + 1, n, 2),
+    "slots_auv": lambda n, k, t: (t, n),
 }
+"""Axes of the arrays, for N AUVs, K nodes and T_max slots (the log keeps T_max + 1 states: the
+start and the end of every slot)."""
 
 
 def _array(axes: str, fill: Any = 0.0, dtype: type = float) -> Any:
@@ -80,16 +89,60 @@ class MissionState:
     @classmethod
     def zeros(cls, batch: tuple[int, ...], n_auvs: int, n_nodes: int) -> MissionState:
         """Every array allocated (zeros, or its reset value) for `batch` environments."""
-        arrays = {}
-        for f in dataclasses.fields(cls):
-            meta = f.metadata
-            shape = (*batch, *SHAPES[meta["axes"]](n_auvs, n_nodes))
-            fill = 0 if meta["fill"] is None else meta["fill"]
-            arrays[f.name] = np.full(shape, fill, dtype=meta["dtype"])
-        return cls(**arrays)
+        return cls(**_allocate(cls, batch, n_auvs, n_nodes, 0))
 
     def reset_rows(self, rows: Any) -> None:
         """Reset every array with a fixed reset value in the given batch rows."""
         for f in dataclasses.fields(self):
             if f.metadata["fill"] is not None:
                 getattr(self, f.name)[rows] = f.metadata["fill"]
+
+    def arrays(self, batched: bool) -> Any:
+        """The same arrays with a leading batch axis (a `MissionArrays` of views)."""
+        return _with_batch_axis(self, MissionArrays, batched)
+
+
+@dataclass
+class MissionLog:
+    """Per-slot history of the episode (for metrics, figures and rendering): entry t of the
+    states is the state after slot t (0: the start), entry t of the links is slot t + 1's."""
+
+    positions_m: FloatArray = _array("states_auv_xy")
+    headings_rad: FloatArray = _array("states_auv")
+    speeds_mps: FloatArray = _array("states_auv")
+    mean_aoi: FloatArray = _array("states")
+    jain: FloatArray = _array("states")
+    aet_nodes: IntArray = _array("slots_auv", 0, np.int64)
+    uplink_nodes: IntArray = _array("slots_auv", 0, np.int64)
+    uplink_ok: BoolArray = _array("slots_auv", False, bool)
+
+    @classmethod
+    def zeros(cls, batch: tuple[int, ...], n_auvs: int, horizon_slots: int) -> MissionLog:
+        return cls(**_allocate(cls, batch, n_auvs, 0, horizon_slots))
+
+    def arrays(self, batched: bool) -> Any:
+        """The same arrays with a leading batch axis (a `LogArrays` of views)."""
+        return _with_batch_axis(self, LogArrays, batched)
+
+
+def _allocate(cls: Any, batch: tuple[int, ...], n: int, k: int, t: int) -> dict[str, Any]:
+    arrays = {}
+    for f in dataclasses.fields(cls):
+        meta = f.metadata
+        shape = (*batch, *SHAPES[meta["axes"]](n, k, t))
+        fill = 0 if meta["fill"] is None else meta["fill"]
+        arrays[f.name] = np.full(shape, fill, dtype=meta["dtype"])
+    return arrays
+
+
+def _with_batch_axis(obj: Any, kind: Any, batched: bool) -> Any:
+    """`kind` (a namedtuple of the fields) of views with a batch axis: one env gains one."""
+    one = () if batched else (None,)
+    return kind(*(getattr(obj, f)[one] for f in kind._fields))
+
+
+# The field lists are MissionState's and MissionLog's, in order (the C structs' order).
+MissionArrays = namedtuple(  # type: ignore[misc]
+    "MissionArrays", [f.name for f in dataclasses.fields(MissionState)]
+)
+LogArrays = namedtuple("LogArrays", [f.name for f in dataclasses.fields(MissionLog)])  # type: ignore[misc]

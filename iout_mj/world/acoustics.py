@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from iout_mj import native
 from iout_mj.config import AcousticsConfig
 from iout_mj.types import FloatArray
 
@@ -102,6 +103,20 @@ def uplink_energy_j(distance_m: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
     return uplink_power_w(distance_m, cfg) * cfg.data_s
 
 
+LINK_DTYPE = np.dtype(
+    [
+        ("harvest_j", np.float64),
+        ("uplink_j", np.float64),
+        ("wet_per_m", np.float64),
+        ("data_per_m", np.float64),
+        ("spreading", np.float64),
+        ("min_distance_m", np.float64),
+    ]
+)
+"""The link budget's distance-independent constants (`LinkBudget`), as the compiled rules
+read them."""
+
+
 class LinkBudget:
     """The same link budget with every distance-independent term folded into a constant, for
     the per-slot hot path: per distance, one power and two exponentials.
@@ -112,8 +127,7 @@ class LinkBudget:
 
     def __init__(self, cfg: AcousticsConfig):
         sl = source_level_db(cfg.p_tx_w, cfg.eta_tx, cfg.di_tx_db)
-        self.spreading = cfg.spreading_factor
-        self._c_harvest_j = (
+        c_harvest_j = (
             cfg.eta_harv
             * cfg.n_hydrophones
             * cfg.charging_s
@@ -121,22 +135,39 @@ class LinkBudget:
             / (4 * cfg.load_resistance_ohm)
         )
         nl_band = float(noise_psd_db(cfg.f_data_khz, cfg)) + 10 * np.log10(cfg.bandwidth_hz)
-        self._c_uplink_j = cfg.data_s * 10 ** (
+        c_uplink_j = cfg.data_s * 10 ** (
             (required_snr_db(cfg) + nl_band - SL_REF_DB - 10 * np.log10(cfg.eta_tx) - cfg.di_tx_db)
             / 10
         )
         ln10 = np.log(10.0)
-        self._k_wet = -float(thorp_absorption_db_per_km(cfg.f_wet_khz)) * ln10 / 1e4
-        self._k_data = float(thorp_absorption_db_per_km(cfg.f_data_khz)) * ln10 / 1e4
+        self.constants = np.array(
+            [
+                (
+                    c_harvest_j,
+                    c_uplink_j,
+                    -float(thorp_absorption_db_per_km(cfg.f_wet_khz)) * ln10 / 1e4,
+                    float(thorp_absorption_db_per_km(cfg.f_data_khz)) * ln10 / 1e4,
+                    cfg.spreading_factor,
+                    MIN_DISTANCE_M,
+                )
+            ],
+            dtype=LINK_DTYPE,
+        )
+        """(1,) record of LINK_DTYPE."""
 
     def energies_j(self, distance_m: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """(harvested energy per slot, uplink energy E_req) at each distance."""
-        d = np.maximum(distance_m, MIN_DISTANCE_M)
-        spread = d**self.spreading
-        return (
-            self._c_harvest_j * np.exp(self._k_wet * d) / spread,
-            self._c_uplink_j * np.exp(self._k_data * d) * spread,
+        """(harvested energy per slot, uplink energy E_req) at each distance (any shape), by
+        the compiled `iout_link_energies` that the slot rules use."""
+        d = np.ascontiguousarray(distance_m, dtype=float)
+        harvest, uplink = np.empty_like(d), np.empty_like(d)
+        native.lib.iout_link_energies_each(
+            native.address(self.constants),
+            native.address(d),
+            d.size,
+            native.address(harvest),
+            native.address(uplink),
         )
+        return harvest, uplink
 
 
 def bits_per_delivery(cfg: AcousticsConfig) -> float:

@@ -20,16 +20,6 @@ def propulsion_power_w(speed_mps: ArrayLike, motion: MotionConfig) -> FloatArray
     return drag_power_w(speed_mps, motion) + motion.hotel_power_w
 
 
-def travel_energy_j(
-    speed_mps: ArrayLike, distance_m: ArrayLike, motion: MotionConfig
-) -> FloatArray:
-    """The cubic term of E_prop: drag power over the travel time d / v (0 when v = 0)."""
-    v = np.asarray(speed_mps, dtype=float)
-    d = np.asarray(distance_m, dtype=float)
-    safe_v = np.where(v > 0, v, 1.0)
-    return np.where(v > 0, drag_power_w(v, motion) * d / safe_v, 0.0)
-
-
 def slot_energy_j(
     speed_mps: ArrayLike, distance_m: ArrayLike, slot_s: float, motion: MotionConfig
 ) -> FloatArray:

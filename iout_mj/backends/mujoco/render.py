@@ -204,11 +204,12 @@ class MissionRenderer:
                 colors[k].astype(np.float32),
             )
         # Links of the slot being shown: AET (orange) and uplink (cyan, grey if it failed).
-        log = mission.log
-        if log.aet_nodes:
-            aet, up, ok = log.aet_nodes[-1], log.uplink_nodes[-1], log.uplink_ok[-1]
+        log, slot = mission.log, int(mission.state.slot)
+        if slot > 0:
+            aet, up = log.aet_nodes[slot - 1], log.uplink_nodes[slot - 1]
+            ok = log.uplink_ok[slot - 1]
             for i in range(mission.n_auvs):
-                if mission.state.docked[i] and len(log.positions_m) > 2:
+                if mission.state.docked[i] and slot > 1:
                     continue
                 p = np.array([xy[i, 0], xy[i, 1], z_auv])
                 q_aet = np.array([*net.nodes_m[aet[i]], z_bed])

@@ -1,0 +1,46 @@
+/* The kinematic backend's slot, compiled with the mission's rules into one call. */
+#include <math.h>
+
+#include "../native.h"
+
+#define PATH_POINTS 5 /* backends.kinematic.PATH_FRACTIONS: 0.2, 0.4, ..., 1 of each move */
+
+/* Each AUV flies its setpoints through the water and drifts with the current (docked AUVs
+ * stay); a move that would end outside the area is rejected (the AUV stays). Propulsion
+ * energy is the cubic term for the distance flown through the water. */
+void iout_kinematic_slot(const Mission *m)
+{
+    const Params *p = m->p;
+    const State *s = &m->s;
+    int64_t n = m->n_auvs;
+    double end[2 * n], heading[n], speed[n], energy_j[n], yaw_j[n], path[PATH_POINTS * 2 * n];
+    for (int64_t e = 0; e < m->n_envs; e++) {
+        iout_begin_env(m, e);
+        for (int64_t i = 0; i < n; i++) {
+            int64_t a = e * n + i;
+            double x0 = s->positions_m[2 * a], y0 = s->positions_m[2 * a + 1];
+            double sx = s->straight_end_m[2 * a], sy = s->straight_end_m[2 * a + 1];
+            double drift_s = s->docked[a] ? 0.0 : p->slot_s;
+            double x = sx + s->current_mps[2 * e] * drift_s;
+            double y = sy + s->current_mps[2 * e + 1] * drift_s;
+            double water_m = hypot(sx - x0, sy - y0);
+            if (s->boundary_attempt[a] || !iout_in_area(p, x, y)) {
+                x = x0;
+                y = y0;
+                water_m = 0.0;
+            }
+            end[2 * i] = x;
+            end[2 * i + 1] = y;
+            heading[i] = M_PI - fmod(fmod(M_PI - s->heading_sp[a], 2 * M_PI) + 2 * M_PI, 2 * M_PI);
+            speed[i] = s->speed_sp[a];
+            energy_j[i] = speed[i] > 0.0 ? p->drag_power_w_at_1mps * pow(speed[i], 3) * water_m / speed[i] : 0.0;
+            yaw_j[i] = 0.0;
+            for (int64_t f = 0; f < PATH_POINTS; f++) {
+                double frac = (double)(f + 1) / PATH_POINTS;
+                path[f * 2 * n + 2 * i] = x0 + frac * (x - x0);
+                path[f * 2 * n + 2 * i + 1] = y0 + frac * (y - y0);
+            }
+        }
+        iout_end_env(m, e, end, heading, speed, energy_j, yaw_j, path, 2 * n, PATH_POINTS);
+    }
+}

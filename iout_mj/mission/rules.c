@@ -1,0 +1,304 @@
+/* The paper's rules of a slot, compiled: one implementation for every backend (see
+ * mission/rules.py, which states them and calls these functions). */
+#include <math.h>
+#include <string.h>
+
+#include "../native.h"
+
+extern const char *const IOUT_REWARD_TERMS;
+
+const char *iout_layout(void)
+{
+    static char layout[2048];
+    if (!layout[0]) {
+        strcat(layout,
+               "params:slot_s,horizon_slots,area_x_m,area_y_m,inv_diag_per_m,dock_x_m,dock_y_m,"
+               "dock_radius_m,v_max_mps,hotel_j,drag_power_w_at_1mps,k_reset,aoi_max,"
+               "deadline_speed_mps,fairness_lambda,fairness_min_deliveries,stall_distance_m,"
+               "margin_epsilon_j,collision_sigma_m,safety_distance_m,collision_distance_m,"
+               "energy_obs_ref_j,obs_high,w_docking_progress,w_aoi,"
+               "w_fairness,w_boundary,w_stall,w_energy_margin,w_infeasible_uplink,w_collision,"
+               "w_dock_first_entry,w_dock_all,w_deadline,w_undocked_at_end;"
+               "link:harvest_j,uplink_j,wet_per_m,data_per_m,spreading,min_distance_m;"
+               "network:nodes_m,energy_j,aoi,service_count,deliveries,mean_aoi,jain;"
+               "state:positions_m,headings_rad,speeds_mps,heading_sp,speed_sp,straight_end_m,"
+               "boundary_attempt,action,docked,dock_dist_m,deadline_slack_m,distance_m,"
+               "battery_j,propulsion_energy_j,yaw_energy_j,current_mps,slot,sum_mean_aoi,"
+               "sum_objective,aoi_after_mission,min_separation_m,collisions,all_docked_paid,"
+               "reward,terminated,truncated;"
+               "log:positions_m,headings_rad,speeds_mps,mean_aoi,jain,aet_nodes,uplink_nodes,"
+               "uplink_ok;terms:");
+        strcat(layout, IOUT_REWARD_TERMS);
+    }
+    return layout;
+}
+
+/* ------------------------------------------------------------------------- actions */
+int64_t iout_first_bad_action(const int64_t *actions, int64_t count, const int64_t *high,
+                              int64_t width)
+{
+    for (int64_t j = 0; j < count; j++)
+        if (actions[j] < 0 || actions[j] >= high[j % width])
+            return j;
+    return -1;
+}
+
+bool iout_in_area(const Params *p, double x, double y)
+{
+    return 0.0 <= x && x <= p->area_x_m && 0.0 <= y && y <= p->area_y_m;
+}
+
+/* Setpoints of env e from its (N, 4) action indices: theta_sp += dtheta (unwrapped),
+ * v_sp = clip(v_sp + dv, 0, V_max); docked AUVs stop. Also the straight-line end of the
+ * slot's move and whether it leaves the area (a boundary attempt). */
+void iout_begin_env(const Mission *m, int64_t e)
+{
+    const Params *p = m->p;
+    const State *s = &m->s;
+    for (int64_t i = e * m->n_auvs; i < (e + 1) * m->n_auvs; i++) {
+        const int64_t *a = m->actions + 4 * i;
+        bool moving = !s->docked[i];
+        memcpy(s->action + 4 * i, a, 4 * sizeof(int64_t));
+        if (moving) {
+            s->heading_sp[i] += m->dtheta_rad[a[0]];
+            s->speed_sp[i] = fmin(fmax(s->speed_sp[i] + m->dv_mps[a[1]], 0.0), p->v_max_mps);
+        } else {
+            s->speed_sp[i] = 0.0;
+        }
+        double step_m = s->speed_sp[i] * p->slot_s;
+        double x = s->positions_m[2 * i] + step_m * cos(s->heading_sp[i]);
+        double y = s->positions_m[2 * i + 1] + step_m * sin(s->heading_sp[i]);
+        s->straight_end_m[2 * i] = x;
+        s->straight_end_m[2 * i + 1] = y;
+        s->boundary_attempt[i] = moving && !iout_in_area(p, x, y);
+    }
+}
+
+void iout_begin_slot(const Mission *m)
+{
+    for (int64_t e = 0; e < m->n_envs; e++)
+        iout_begin_env(m, e);
+}
+
+/* ------------------------------------------------------------------------- the slot */
+/* How much farther from the dock an undocked AUV is than it can fly at v_ref in the time
+ * left (0 when on schedule or docked); its negative is the shaping potential. */
+static double deadline_slack_m(const Params *p, double dock_dist_m, bool docked, int64_t slot)
+{
+    if (docked)
+        return 0.0;
+    double reach_m = p->deadline_speed_mps * (double)(p->horizon_slots - slot) * p->slot_s;
+    return fmax(0.0, dock_dist_m - reach_m);
+}
+
+/* Sum over the slots left until T_max of the mean AoI if no node is served again:
+ * sum_{j=1..L} min(a + j, A_max) per node, in closed form. */
+double iout_unserved_aoi_sum(const Params *p, int64_t slot, const double *aoi, int64_t k)
+{
+    double left = (double)(p->horizon_slots - slot > 0 ? p->horizon_slots - slot : 0);
+    double total = 0.0;
+    for (int64_t j = 0; j < k; j++) {
+        double rising = fmin(fmax(floor(p->aoi_max - aoi[j]), 0.0), left); /* before the cap */
+        total += rising * aoi[j] + rising * (rising + 1) / 2 + (left - rising) * p->aoi_max;
+    }
+    return total / (double)k;
+}
+
+/* Closest approach and collisions over a slot's path (S points of (N, 2), `stride` doubles
+ * apart); pairs of AUVs both parked at the dock are left out. */
+static void book_separation(const Mission *m, int64_t e, const double *path_m, int64_t stride,
+                            int64_t n_path, const bool *was_docked)
+{
+    const State *s = &m->s;
+    for (int64_t i = 0; i < m->n_auvs; i++)
+        for (int64_t j = i + 1; j < m->n_auvs; j++) {
+            if (was_docked[i] && was_docked[j])
+                continue;
+            double gap = INFINITY;
+            for (int64_t t = 0; t < n_path; t++) {
+                const double *x = path_m + t * stride;
+                gap = fmin(gap, hypot(x[2 * i] - x[2 * j], x[2 * i + 1] - x[2 * j + 1]));
+            }
+            s->min_separation_m[e] = fmin(s->min_separation_m[e], gap);
+            s->collisions[e] += gap < m->p->collision_distance_m;
+        }
+}
+
+/* Log env e's state after `slot` slots (kept up to T_max). */
+static void record(const Mission *m, int64_t e, int64_t slot)
+{
+    int64_t n = m->n_auvs, t = m->p->horizon_slots;
+    if (slot > t)
+        return;
+    const Log *log = &m->log;
+    int64_t row = e * (t + 1) + slot;
+    memcpy(log->positions_m + 2 * n * row, m->s.positions_m + 2 * n * e, 2 * n * sizeof(double));
+    memcpy(log->headings_rad + n * row, m->s.headings_rad + n * e, n * sizeof(double));
+    memcpy(log->speeds_mps + n * row, m->s.speeds_mps + n * e, n * sizeof(double));
+    log->mean_aoi[row] = m->net.mean_aoi[e];
+    log->jain[row] = m->net.jain[e];
+}
+
+/* Book env e's slot after the vehicles moved: energy (the dock powers docked AUVs' hotel
+ * load), the network (distances at the end of the slot), docking, termination, reward terms,
+ * statistics and the log. Per-AUV inputs are env e's (N, ...) rows. */
+void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
+                  const double *headings_rad, const double *speeds_mps,
+                  const double *propulsion_energy_j, const double *yaw_energy_j,
+                  const double *path_m, int64_t path_stride, int64_t n_path)
+{
+    const Params *p = m->p;
+    const State *s = &m->s;
+    int64_t n = m->n_auvs, k = m->n_nodes, a0 = e * n;
+    bool was_docked[n], active[n], uplink_ok[n], delivered[k];
+    double moved_m[n], req_j[n], stored_j[n], harvested_j[k], dock_dist_m[n], slack_m[n];
+    for (int64_t i = 0; i < n; i++) {
+        int64_t a = a0 + i;
+        was_docked[i] = s->docked[a];
+        active[i] = !was_docked[i];
+        moved_m[i] = hypot(positions_m[2 * i] - s->positions_m[2 * a],
+                           positions_m[2 * i + 1] - s->positions_m[2 * a + 1]);
+        s->positions_m[2 * a] = positions_m[2 * i];
+        s->positions_m[2 * a + 1] = positions_m[2 * i + 1];
+        s->headings_rad[a] = headings_rad[i];
+        s->speeds_mps[a] = speeds_mps[i];
+        double hotel_j = was_docked[i] ? 0.0 : p->hotel_j;
+        s->propulsion_energy_j[a] += propulsion_energy_j[i] + hotel_j;
+        s->yaw_energy_j[a] += yaw_energy_j[i];
+        s->battery_j[a] -= propulsion_energy_j[i] + yaw_energy_j[i] + hotel_j;
+    }
+    iout_serve(&m->net, e, n, k, m->link, p->k_reset, p->aoi_max, positions_m,
+               s->action + 4 * a0 + 2, s->action + 4 * a0 + 3, 4, active,
+               s->distance_m + a0 * k, uplink_ok, req_j, stored_j, harvested_j, delivered);
+
+    bool all_docked = true, battery_empty = false;
+    for (int64_t i = 0; i < n; i++) {
+        int64_t a = a0 + i;
+        dock_dist_m[i] = hypot(positions_m[2 * i] - p->dock_x_m, positions_m[2 * i + 1] - p->dock_y_m);
+        s->docked[a] = s->docked[a] || dock_dist_m[i] <= p->dock_radius_m;
+        all_docked = all_docked && s->docked[a];
+        battery_empty = battery_empty || s->battery_j[a] <= 0.0;
+    }
+    bool all_docked_first = all_docked && !s->all_docked_paid[e];
+    s->all_docked_paid[e] = s->all_docked_paid[e] || all_docked;
+    int64_t slot = ++s->slot[e];
+    for (int64_t i = 0; i < n; i++)
+        slack_m[i] = deadline_slack_m(p, dock_dist_m[i], s->docked[a0 + i], slot);
+    s->terminated[e] = all_docked || battery_empty;
+    s->truncated[e] = slot >= p->horizon_slots && !s->terminated[e];
+    bool ending = s->terminated[e] || s->truncated[e];
+    s->aoi_after_mission[e] = ending ? iout_unserved_aoi_sum(p, slot, m->net.aoi + e * k, k) : 0.0;
+    double mean_aoi = m->net.mean_aoi[e], jain = m->net.jain[e];
+    int64_t deliveries = 0;
+    for (int64_t j = 0; j < k; j++)
+        deliveries += m->net.deliveries[e * k + j];
+    SlotContext c = {
+        .n_auvs = n,
+        .active = active,
+        .moved_m = moved_m,
+        .boundary_attempt = s->boundary_attempt + a0,
+        .positions_m = positions_m,
+        .docked = s->docked + a0,
+        .all_docked_first = all_docked_first,
+        .dock_dist_before_m = s->dock_dist_m + a0,
+        .dock_dist_m = dock_dist_m,
+        .slack_before_m = s->deadline_slack_m + a0,
+        .slack_m = slack_m,
+        .mean_aoi = mean_aoi,
+        .jain = jain,
+        .deliveries = deliveries,
+        .uplink_stored_j = stored_j,
+        .uplink_req_j = req_j,
+        .ending = ending,
+        .aoi_after_mission = s->aoi_after_mission[e],
+    };
+    s->reward[e] = iout_slot_terms(p, &c, m->terms + e * N_REWARD_TERMS);
+    memcpy(s->deadline_slack_m + a0, slack_m, n * sizeof(double));
+    memcpy(s->dock_dist_m + a0, dock_dist_m, n * sizeof(double));
+    s->sum_mean_aoi[e] += mean_aoi;
+    s->sum_objective[e] += mean_aoi + p->fairness_lambda * (1.0 - jain);
+    book_separation(m, e, path_m, path_stride, n_path, was_docked);
+    record(m, e, slot);
+    if (slot <= p->horizon_slots) {
+        int64_t row = (e * p->horizon_slots + slot - 1) * n;
+        for (int64_t i = 0; i < n; i++) {
+            m->log.aet_nodes[row + i] = s->action[4 * (a0 + i) + 2];
+            m->log.uplink_nodes[row + i] = s->action[4 * (a0 + i) + 3];
+            m->log.uplink_ok[row + i] = uplink_ok[i];
+        }
+    }
+}
+
+void iout_end_slot(const Mission *m)
+{
+    int64_t n = m->n_auvs;
+    for (int64_t e = 0; e < m->n_envs; e++)
+        iout_end_env(m, e, m->end_positions_m + 2 * n * e, m->end_headings_rad + n * e,
+                     m->end_speeds_mps + n * e, m->propulsion_energy_j + n * e,
+                     m->yaw_energy_j + n * e, m->path_m + 2 * n * e, 2 * n * m->n_envs,
+                     m->n_path);
+}
+
+/* What follows from a restart's draws (positions, nodes): distances, dock distances, deadline
+ * slack and the log's first entry, in the envs where `restarted`. */
+void iout_start(const Mission *m, const bool *restarted)
+{
+    const Params *p = m->p;
+    const State *s = &m->s;
+    int64_t n = m->n_auvs, k = m->n_nodes;
+    for (int64_t e = 0; e < m->n_envs; e++) {
+        if (!restarted[e])
+            continue;
+        const double *nodes = m->net.nodes_m + e * k * 2;
+        for (int64_t a = e * n; a < (e + 1) * n; a++) {
+            double x = s->positions_m[2 * a], y = s->positions_m[2 * a + 1];
+            for (int64_t j = 0; j < k; j++)
+                s->distance_m[a * k + j] = hypot(x - nodes[2 * j], y - nodes[2 * j + 1]);
+            s->dock_dist_m[a] = hypot(x - p->dock_x_m, y - p->dock_y_m);
+            s->deadline_slack_m[a] = deadline_slack_m(p, s->dock_dist_m[a], s->docked[a], s->slot[e]);
+        }
+        record(m, e, s->slot[e]);
+    }
+}
+
+/* ------------------------------------------------------------------------- observation */
+/* The observed node energy, log10(1 + e / ref) / 5, clipped to the observation's top. */
+double iout_node_energy_level(double energy_j, double ref_j, double high)
+{
+    return fmin(log10(1.0 + energy_j / ref_j) / 5.0, high);
+}
+
+void iout_node_energy_levels(const double *energy_j, int64_t count, double ref_j, double high,
+                             double *out)
+{
+    for (int64_t j = 0; j < count; j++)
+        out[j] = iout_node_energy_level(energy_j[j], ref_j, high);
+}
+
+/* The flat observation of every env, group by group in the order of
+ * mission.observation.OBSERVATION_LAYOUT. */
+void iout_observe(const Mission *m)
+{
+    const Params *p = m->p;
+    const State *s = &m->s;
+    int64_t n = m->n_auvs, k = m->n_nodes, size = 7 * n + 2 * k + n * k + 1;
+    for (int64_t e = 0; e < m->n_envs; e++) {
+        double *o = m->obs + e * size;
+        for (int64_t i = 0, a = e * n; i < n; i++, a++) {
+            o[2 * i] = s->positions_m[2 * a] / p->area_x_m;           /* auv_position */
+            o[2 * i + 1] = s->positions_m[2 * a + 1] / p->area_y_m;
+            o[2 * n + 2 * i] = cos(s->headings_rad[a]);               /* auv_heading */
+            o[2 * n + 2 * i + 1] = sin(s->headings_rad[a]);
+            o[4 * n + i] = s->speeds_mps[a] / p->v_max_mps;           /* auv_speed */
+            o[5 * n + i] = s->docked[a];                              /* docked */
+            for (int64_t j = 0; j < k; j++)                           /* distance */
+                o[6 * n + 2 * k + i * k + j] = s->distance_m[a * k + j] * p->inv_diag_per_m;
+            o[6 * n + 2 * k + n * k + i] = s->dock_dist_m[a] * p->inv_diag_per_m; /* dock */
+        }
+        for (int64_t j = 0; j < k; j++) {
+            o[6 * n + j] = m->net.aoi[e * k + j] / p->aoi_max;                  /* aoi */
+            o[6 * n + k + j] = iout_node_energy_level(m->net.energy_j[e * k + j], p->energy_obs_ref_j, p->obs_high); /* energy */
+        }
+        o[size - 1] = 1.0 - (double)s->slot[e] / (double)p->horizon_slots; /* time_remaining */
+    }
+}

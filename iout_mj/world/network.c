@@ -1,0 +1,99 @@
+/* The sensor network's slot rules and the link budget, compiled (world/network.py states the
+ * rules; this file is their one implementation). */
+#include <math.h>
+
+#include "../native.h"
+
+#define INITIAL_AOI 1.0 /* world.network.INITIAL_AOI: an update resets the age to one slot */
+
+void iout_link_energies(const Link *link, double distance_m, double *harvest_j, double *uplink_j)
+{
+    double d = fmax(distance_m, link->min_distance_m);
+    double spread = pow(d, link->spreading);
+    *harvest_j = link->harvest_j * exp(link->wet_per_m * d) / spread;
+    *uplink_j = link->uplink_j * exp(link->data_per_m * d) * spread;
+}
+
+void iout_link_energies_each(const Link *link, const double *distance_m, int64_t count,
+                             double *harvest_j, double *uplink_j)
+{
+    for (int64_t i = 0; i < count; i++)
+        iout_link_energies(link, distance_m[i], &harvest_j[i], &uplink_j[i]);
+}
+
+double iout_jain(const int64_t *counts, int64_t k)
+{
+    double total = 0.0, sq = 0.0;
+    for (int64_t j = 0; j < k; j++) {
+        total += (double)counts[j];
+        sq += (double)counts[j] * (double)counts[j];
+    }
+    return total * total / ((double)k * sq + (sq == 0.0)); /* 0 if nothing was delivered */
+}
+
+static double mean(const double *x, int64_t k)
+{
+    double total = 0.0;
+    for (int64_t j = 0; j < k; j++)
+        total += x[j];
+    return total / (double)k;
+}
+
+void iout_summarise(const Network *net, int64_t n_envs, int64_t k)
+{
+    for (int64_t e = 0; e < n_envs; e++) {
+        net->mean_aoi[e] = mean(net->aoi + e * k, k);
+        net->jain[e] = iout_jain(net->deliveries + e * k, k);
+    }
+}
+
+void iout_serve(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
+                int64_t k_reset, double aoi_max, const double *auv_xy, const int64_t *wet,
+                const int64_t *data, int64_t node_stride, const bool *active,
+                double *distance_m, bool *uplink_ok, double *uplink_req_j,
+                double *uplink_stored_j, double *harvested_j, bool *delivered)
+{
+    const double *nodes = net->nodes_m + e * k * 2;
+    double *energy = net->energy_j + e * k, *aoi = net->aoi + e * k;
+    int64_t *count = net->service_count + e * k, *deliveries = net->deliveries + e * k;
+    double request_j[k]; /* the cheapest E_req of the active AUVs naming each node */
+    for (int64_t j = 0; j < k; j++) {
+        request_j[j] = INFINITY; /* no active AUV named the node */
+        harvested_j[j] = 0.0;
+    }
+    for (int64_t i = 0; i < n; i++) {
+        int64_t up = data[i * node_stride], charge = wet[i * node_stride];
+        for (int64_t j = 0; j < k; j++) {
+            double d = hypot(auv_xy[2 * i] - nodes[2 * j], auv_xy[2 * i + 1] - nodes[2 * j + 1]);
+            distance_m[i * k + j] = d;
+            if (j != up && j != charge)
+                continue;
+            double harvest, need;
+            iout_link_energies(link, d, &harvest, &need);
+            if (j == up) {
+                uplink_req_j[i] = need;
+                uplink_stored_j[i] = energy[j];
+                if (active[i] && need < request_j[j])
+                    request_j[j] = need;
+            }
+            if (j == charge && active[i])
+                harvested_j[j] += harvest;
+        }
+    }
+    for (int64_t j = 0; j < k; j++) {
+        delivered[j] = energy[j] >= request_j[j]; /* energy stored at the start of the slot */
+        energy[j] += harvested_j[j] - (delivered[j] ? request_j[j] : 0.0);
+        deliveries[j] += delivered[j];
+        count[j] += delivered[j];
+        if (count[j] >= k_reset) {
+            aoi[j] = INITIAL_AOI;
+            count[j] = 0;
+        } else {
+            aoi[j] = fmin(aoi[j] + 1.0, aoi_max);
+        }
+    }
+    for (int64_t i = 0; i < n; i++)
+        uplink_ok[i] = active[i] && delivered[data[i * node_stride]];
+    net->mean_aoi[e] = mean(aoi, k);
+    net->jain[e] = iout_jain(deliveries, k);
+}
