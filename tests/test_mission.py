@@ -1,12 +1,14 @@
 """The mission core driven by a fake backend (no MuJoCo): each reward term by hand."""
 
 import dataclasses
+import pickle
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
+from iout_mj import native
 from iout_mj.config import Config
 from iout_mj.mission import REWARD_TERMS, Mission
 from iout_mj.scenarios import make_config
@@ -163,3 +165,20 @@ def test_world_and_mission_do_not_import_mujoco():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_compiled_rules_refuse_a_library_built_from_other_declarations():
+    with pytest.raises(ImportError, match="other struct declarations"):
+        native.require_layout("state:positions_m")
+
+
+def test_a_pickled_mission_steps_like_the_original_on_its_own_memory():
+    m = mission_at([(100.0, 500.0), (400.0, 500.0)])
+    copy = pickle.loads(pickle.dumps(m))  # the C view holds addresses: rebuilt on unpickling
+    ends = np.array([[125.0, 500.0], [402.0, 500.0]])
+    first = FakeBackend(m).step(action((0, 0), (1, 1)), ends)
+    assert FakeBackend(copy).step(action((0, 0), (1, 1)), ends) == first
+    np.testing.assert_array_equal(copy.flat_observation(), m.flat_observation())
+    FakeBackend(copy).step(action((0, 0), (1, 1)), ends + 50.0)
+    assert copy.state.slot == 2 and m.state.slot == 1
+    assert not np.array_equal(copy.state.positions_m, m.state.positions_m)

@@ -56,7 +56,6 @@ class Mission:
         self.area_m = np.asarray(sc.area_m, dtype=float)
         self.dock_m = np.asarray(sc.dock_center_m, dtype=float)
         self.inv_area = 1.0 / self.area_m
-        self.inv_diag = 1.0 / float(np.hypot(*self.area_m))
         self.actions = ActionMap(cfg, self.batch)
         self.network = SensorNetwork(sc.nodes_m, cfg.network, cfg.acoustics, self.batch)
         self.state = MissionState.zeros(self.batch, self.n_auvs, self.n_nodes)
@@ -64,6 +63,7 @@ class Mission:
         """Per-slot history of the episode (`MissionLog`)."""
         self.params = rules.params(cfg)
         """The config's constants for the rules, a (1,) record of `rules.PARAMS_DTYPE`."""
+        self.inv_diag = float(self.params["inv_diag_per_m"][0])
         self.term_values = np.zeros((*(self.batch or (1,)), len(REWARD_TERMS)))
         """The last slot's reward terms, (B, terms) in the order of REWARD_TERMS."""
         self._bind()
@@ -78,7 +78,15 @@ class Mission:
         self.inputs: dict[str, np.ndarray] = {
             "actions": np.zeros((*b, n, 4), dtype=np.int64),
             "end_positions_m": np.zeros((*b, n, 2)),
-            **{k: np.zeros((*b, n)) for k in rules.INPUTS[2:6]},
+            **{
+                k: np.zeros((*b, n))
+                for k in (
+                    "end_headings_rad",
+                    "end_speeds_mps",
+                    "propulsion_energy_j",
+                    "yaw_energy_j",
+                )
+            },
             "path_m": np.zeros((0, *b, n, 2)),
             "terms": self.term_values,
             "obs": np.zeros((*b, sum(self.observation_sizes.values()))),
@@ -117,7 +125,7 @@ class Mission:
     def terms(self) -> dict[str, Any]:
         """The last slot's reward terms by name (arrays over the batch; numbers for one env)."""
         if self.batch:
-            return dict(zip(REWARD_TERMS, self.term_values.T, strict=True))
+            return dict(zip(REWARD_TERMS, self.term_values.T.copy(), strict=True))
         return dict(zip(REWARD_TERMS, self.term_values[0].tolist(), strict=True))
 
     # ------------------------------------------------------------------ episode

@@ -29,6 +29,9 @@ const char *iout_layout(void)
                "log:positions_m,headings_rad,speeds_mps,mean_aoi,jain,aet_nodes,uplink_nodes,"
                "uplink_ok;terms:");
         strcat(layout, IOUT_REWARD_TERMS);
+        strcat(layout, ";mission:n_envs,n_auvs,n_nodes,n_path,p,link,dtheta_rad,dv_mps,s,net,log,"
+                       "actions,end_positions_m,end_headings_rad,end_speeds_mps,"
+                       "propulsion_energy_j,yaw_energy_j,path_m,terms,obs");
     }
     return layout;
 }
