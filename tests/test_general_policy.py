@@ -108,6 +108,7 @@ def test_imitation_learns_the_planners_actions():
         make_config(1, 7), physics=dataclasses.replace(Config().physics, current_jitter_mps=0.3)
     )
     cells = [(4, base), (6, base)]
+    torch.manual_seed(0)  # the untrained policy's accuracy depends on its initial weights
     policy = TokenPolicy(*token_spaces(base), lambda _: 1e-3, width=32)
     data = imitation.Demonstrations()
     rng = np.random.RandomState(0)
@@ -115,8 +116,9 @@ def test_imitation_learns_the_planners_actions():
     assert len(data.obs) == sum(len(r) for r in data.rewards) and len(metrics) == 6
     before, *_ = imitation.fit(policy, data, 0.99, 1, learning_rate=1e-9, rng=rng)
     after, nll, rms = imitation.fit(policy, data, 0.99, 25, rng=rng)
-    # the AET node (a tour target) and the uplink node are learned well above chance
-    assert after[2] > before[2] + 0.2 and after[3] > before[3] + 0.1
+    # the AET node (a tour target) and the uplink node are learned, to over twice chance (1/K,
+    # K = 4 or 6: ~0.21): 0.55 to 0.58 and 0.59 to 0.63 over initial weights of seeds 0-5
+    assert after[2] > max(before[2], 0.45) and after[3] > max(before[3], 0.45)
     assert rms.var > 0 and np.isfinite(nll)
 
 
