@@ -30,13 +30,14 @@ def _load() -> ctypes.CDLL:
         )
     built = Path(spec.origin)
     package = Path(__file__).parent
-    sources = [package / "native.h", *package.glob("*/*.c")]
-    stale = [s.name for s in sources if s.stat().st_mtime > built.stat().st_mtime]
-    if stale and built.parent == package:  # a source checkout whose C changed since the build
-        raise ImportError(
-            f"{built.name} is older than {', '.join(stale)}: rebuild it (`make setup`, or "
-            "`pip install -e .`)"
-        )
+    if (package.parent / "pyproject.toml").exists():  # a source checkout: is the build current?
+        sources = [package / "native.h", *package.glob("*/*.c")]
+        stale = [s.name for s in sources if s.stat().st_mtime > built.stat().st_mtime]
+        if stale:
+            raise ImportError(
+                f"{built.name} is older than {', '.join(stale)}: rebuild it (`make setup`, or "
+                "`pip install -e .`)"
+            )
     return ctypes.CDLL(str(built))
 
 
