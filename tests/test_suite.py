@@ -47,6 +47,31 @@ def test_observation_follows_its_one_declaration(name, backend):
 
 
 @pytest.mark.parametrize(("name", "backend"), CASES)
+def test_every_observation_group_holds_what_its_declaration_says(name, backend):
+    env = make(name, backend)
+    obs = episode(env, 2, steps=6)[-1][0]  # the compiled observation after a few slots
+    m = env.unwrapped.mission
+    s, net, cfg = m.state, m.network, m.cfg
+    expected = {
+        "auv_position": s.positions_m / np.asarray(cfg.scenario.area_m),
+        "auv_heading": np.stack([np.cos(s.headings_rad), np.sin(s.headings_rad)], -1),
+        "auv_speed": s.speeds_mps / cfg.motion.v_max_mps,
+        "docked": s.docked.astype(float),
+        "aoi": net.aoi / cfg.network.aoi_max,
+        "node_energy": np.minimum(np.log10(1 + net.energy_j / 1e-3) / 5, 2.0),
+        "distance": np.hypot(*np.moveaxis(s.positions_m[:, None] - net.nodes_m[None], -1, 0)),
+        "dock_distance": np.hypot(*(s.positions_m - cfg.scenario.dock_center_m).T),
+        "time_remaining": np.array([1 - s.slot / cfg.scenario.horizon_slots]),
+    }
+    diagonal = np.hypot(*cfg.scenario.area_m)
+    expected["distance"] /= diagonal
+    expected["dock_distance"] /= diagonal
+    flat = np.concatenate([v.reshape(-1) for v in expected.values()])
+    assert tuple(expected) == tuple(g.name for g in OBSERVATION_LAYOUT)
+    np.testing.assert_allclose(obs, flat.astype(np.float32), rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize(("name", "backend"), CASES)
 def test_no_memory_shared_between_observations(name, backend):
     env = make(name, backend)
     steps = episode(env, 1, steps=3)
