@@ -153,6 +153,23 @@ def test_network_and_energy_bookkeeping(backend):
     assert m.network.aoi[0] == 1.0  # third delivery resets
 
 
+def test_kinematic_slot_flies_the_setpoints_and_drifts_with_the_current():
+    cfg = scenario(make_config(2, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0)
+    cfg = cfg.replace(physics=dataclasses.replace(cfg.physics, current_mps=(0.1, -0.2)))
+    env = make("kinematic", config=cfg)
+    env.reset(seed=0)
+    m = env.unwrapped.mission
+    start = m.state.positions_m.copy()
+    env.step(np.array([8, 5, 0, 0, 2, 1, 1, 1]))  # AUV 0: +15 deg, +0.267 m/s; AUV 1: -15, -0.267
+    theta = np.radians([15.0, -15.0])  # (2 j / 10 - 1) * 25 deg from heading 0
+    v = 1.0 + np.array([1.0, -1.0]) * 0.4 * 2 / 3  # (2 j / 6 - 1) * 0.4 m/s from 1 m/s
+    water = v[:, None] * 25.0 * np.stack([np.cos(theta), np.sin(theta)], -1)
+    np.testing.assert_allclose(m.state.positions_m, start + water + [[2.5, -5.0]], atol=1e-9)
+    np.testing.assert_allclose(m.state.headings_rad, theta, atol=1e-12)
+    drag_w = 0.5 * 1000.0 * 0.006 * 3.0 * v**3 / 0.7  # rho C_d S v^3 / (2 eta)
+    np.testing.assert_allclose(m.state.propulsion_energy_j, drag_w * 25.0 + 40.0 * 25.0)
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_boundary_attempt_is_penalised_and_kept_inside(backend):
     cfg = scenario(
