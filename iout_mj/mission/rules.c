@@ -279,29 +279,37 @@ void iout_node_energy_levels(const double *energy_j, int64_t count, double ref_j
 }
 
 /* The flat observation of every env, group by group in the order of
- * mission.observation.OBSERVATION_LAYOUT. */
+ * mission.observation.OBSERVATION_LAYOUT (each loop below is one group). */
 void iout_observe(const Mission *m)
 {
     const Params *p = m->p;
     const State *s = &m->s;
     int64_t n = m->n_auvs, k = m->n_nodes, size = 7 * n + 2 * k + n * k + 1;
     for (int64_t e = 0; e < m->n_envs; e++) {
-        double *o = m->obs + e * size;
-        for (int64_t i = 0, a = e * n; i < n; i++, a++) {
-            o[2 * i] = s->positions_m[2 * a] / p->area_x_m;           /* auv_position */
-            o[2 * i + 1] = s->positions_m[2 * a + 1] / p->area_y_m;
-            o[2 * n + 2 * i] = cos(s->headings_rad[a]);               /* auv_heading */
-            o[2 * n + 2 * i + 1] = sin(s->headings_rad[a]);
-            o[4 * n + i] = s->speeds_mps[a] / p->v_max_mps;           /* auv_speed */
-            o[5 * n + i] = s->docked[a];                              /* docked */
-            for (int64_t j = 0; j < k; j++)                           /* distance */
-                o[6 * n + 2 * k + i * k + j] = s->distance_m[a * k + j] * p->inv_diag_per_m;
-            o[6 * n + 2 * k + n * k + i] = s->dock_dist_m[a] * p->inv_diag_per_m; /* dock */
+        const double *xy = s->positions_m + 2 * n * e, *heading = s->headings_rad + n * e;
+        const double *aoi = m->net.aoi + k * e, *energy = m->net.energy_j + k * e;
+        const double *distance = s->distance_m + n * k * e;
+        double *o = m->obs + size * e;
+        for (int64_t i = 0; i < n; i++) { /* auv_position */
+            *o++ = xy[2 * i] / p->area_x_m;
+            *o++ = xy[2 * i + 1] / p->area_y_m;
         }
-        for (int64_t j = 0; j < k; j++) {
-            o[6 * n + j] = m->net.aoi[e * k + j] / p->aoi_max;                  /* aoi */
-            o[6 * n + k + j] = iout_node_energy_level(m->net.energy_j[e * k + j], p->energy_obs_ref_j, p->obs_high); /* energy */
+        for (int64_t i = 0; i < n; i++) { /* auv_heading */
+            *o++ = cos(heading[i]);
+            *o++ = sin(heading[i]);
         }
-        o[size - 1] = 1.0 - (double)s->slot[e] / (double)p->horizon_slots; /* time_remaining */
+        for (int64_t i = 0; i < n; i++) /* auv_speed */
+            *o++ = s->speeds_mps[n * e + i] / p->v_max_mps;
+        for (int64_t i = 0; i < n; i++) /* docked */
+            *o++ = s->docked[n * e + i];
+        for (int64_t j = 0; j < k; j++) /* aoi */
+            *o++ = aoi[j] / p->aoi_max;
+        for (int64_t j = 0; j < k; j++) /* node_energy */
+            *o++ = iout_node_energy_level(energy[j], p->energy_obs_ref_j, p->obs_high);
+        for (int64_t ij = 0; ij < n * k; ij++) /* distance */
+            *o++ = distance[ij] * p->inv_diag_per_m;
+        for (int64_t i = 0; i < n; i++) /* dock_distance */
+            *o++ = s->dock_dist_m[n * e + i] * p->inv_diag_per_m;
+        *o = 1.0 - (double)s->slot[e] / (double)p->horizon_slots; /* time_remaining */
     }
 }
