@@ -32,6 +32,7 @@ from iout_mj.types import BoolArray, FloatArray, IntArray
 from iout_mj.world import acoustics
 
 INITIAL_AOI = 1.0
+"""AoI after a reset and after the K_reset-th delivery (one slot; `network.c` too)."""
 
 
 def jain_index(counts: ArrayLike) -> Any:
@@ -180,3 +181,4 @@ class SensorNetwork:
 
 
 NETWORK_STRUCT = native.pointers("Network", NetworkArrays._fields)
+"""`Network` of native.h: one pointer per array of `NetworkArrays`, in order."""
