@@ -109,6 +109,8 @@ void iout_link_energies(const Link *link, double distance_m, double *harvest_j, 
 void iout_link_energies_each(const Link *link, const double *distance_m, int64_t count,
                              double *harvest_j, double *uplink_j);
 double iout_jain(const int64_t *counts, int64_t k);
+void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int64_t k,
+                    double *distance_m);
 void iout_summarise(const Network *net, int64_t n_envs, int64_t k);
 void iout_serve(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
                 int64_t k_reset, double aoi_max, const double *auv_xy, const int64_t *wet,

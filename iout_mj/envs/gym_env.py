@@ -14,6 +14,7 @@ from iout_mj.backends.mujoco import vehicle
 from iout_mj.backends.mujoco.render import MissionRenderer
 from iout_mj.backends.mujoco.task import make_environment
 from iout_mj.mission import OBS_HIGH, OBS_LOW, OBSERVATION_DOC, REWARD_TERMS, Mission
+from iout_mj.mission.observation import flatten_observation
 from iout_mj.scenarios import ConfigLike, resolve_config
 
 ENV_ID = "iout_mj/MultiAUV-v0"
@@ -141,9 +142,9 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         if seed is not None:
             target = self._env.task if self.backend == "mujoco" else self._env
             target.reseed(seed)
-        self._env.reset()
+        ts = self._env.reset()
         self._needs_reset = False
-        self._last_obs = self.mission.flat_observation()
+        self._last_obs = flatten_observation(ts.observation)
         if self.render_mode is not None:
             self.renderer.reset()
             if self.render_mode == "rgb_array_list":
@@ -161,10 +162,11 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
             obs = mission.flat_observation()
         else:
             try:
-                reward = float(self._env.step(action).reward)
+                ts = self._env.step(action)
             except PhysicsError as exc:
                 return self._failed(str(exc))
-            obs = mission.flat_observation()
+            reward = float(ts.reward)
+            obs = flatten_observation(ts.observation)  # the task's, not observed a second time
             if not np.all(np.isfinite(obs)):
                 return self._failed("non-finite observation (diverged state)")
         self._last_obs = obs

@@ -95,14 +95,16 @@ class Mission:
         self.view = rules.MissionView(
             n_envs=b[0], n_auvs=n, n_nodes=self.n_nodes, n_path=0, net=self.network.struct
         )
-        for name, array in (
-            ("p", self.params),
-            ("link", self.network.link.constants),
-            ("dtheta_rad", self.actions.dtheta_rad),
-            ("dv_mps", self.actions.dv_mps),
-            *self.inputs.items(),
-        ):
+        constants = {
+            "p": self.params,
+            "link": self.network.link.constants,
+            "dtheta_rad": self.actions.dtheta_rad,
+            "dv_mps": self.actions.dv_mps,
+        }
+        for name, array in constants.items():
             setattr(self.view, name, native.address(array))
+        for name in rules.INPUTS:  # every pointer the C reads (a missing one is a KeyError)
+            setattr(self.view, name, native.address(self.inputs[name]))
         native.fill(self.view.s, self.arrays)
         native.fill(self.view.log, self.log_arrays)
         self.view_address = ctypes.addressof(self.view)

@@ -252,11 +252,10 @@ void iout_start(const Mission *m, const bool *restarted)
     for (int64_t e = 0; e < m->n_envs; e++) {
         if (!restarted[e])
             continue;
-        const double *nodes = m->net.nodes_m + e * k * 2;
+        iout_distances(s->positions_m + 2 * n * e, n, m->net.nodes_m + 2 * k * e, k,
+                       s->distance_m + n * k * e);
         for (int64_t a = e * n; a < (e + 1) * n; a++) {
             double x = s->positions_m[2 * a], y = s->positions_m[2 * a + 1];
-            for (int64_t j = 0; j < k; j++)
-                s->distance_m[a * k + j] = hypot(x - nodes[2 * j], y - nodes[2 * j + 1]);
             s->dock_dist_m[a] = hypot(x - p->dock_x_m, y - p->dock_y_m);
             s->deadline_slack_m[a] = deadline_slack_m(p, s->dock_dist_m[a], s->docked[a], s->slot[e]);
         }

@@ -47,6 +47,15 @@ void iout_summarise(const Network *net, int64_t n_envs, int64_t k)
     }
 }
 
+void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int64_t k,
+                    double *distance_m)
+{
+    for (int64_t i = 0; i < n; i++)
+        for (int64_t j = 0; j < k; j++)
+            distance_m[i * k + j] =
+                hypot(auv_xy[2 * i] - nodes_m[2 * j], auv_xy[2 * i + 1] - nodes_m[2 * j + 1]);
+}
+
 void iout_serve(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
                 int64_t k_reset, double aoi_max, const double *auv_xy, const int64_t *wet,
                 const int64_t *data, int64_t node_stride, const bool *active,
@@ -61,15 +70,14 @@ void iout_serve(const Network *net, int64_t e, int64_t n, int64_t k, const Link 
         request_j[j] = INFINITY; /* no active AUV named the node */
         harvested_j[j] = 0.0;
     }
+    iout_distances(auv_xy, n, nodes, k, distance_m);
     for (int64_t i = 0; i < n; i++) {
         int64_t up = data[i * node_stride], charge = wet[i * node_stride];
         for (int64_t j = 0; j < k; j++) {
-            double d = hypot(auv_xy[2 * i] - nodes[2 * j], auv_xy[2 * i + 1] - nodes[2 * j + 1]);
-            distance_m[i * k + j] = d;
             if (j != up && j != charge)
                 continue;
             double harvest, need;
-            iout_link_energies(link, d, &harvest, &need);
+            iout_link_energies(link, distance_m[i * k + j], &harvest, &need);
             if (j == up) {
                 uplink_req_j[i] = need;
                 uplink_stored_j[i] = energy[j];
