@@ -23,3 +23,8 @@ class PolicyMismatchError(PolicyError):
 
 class CheckpointError(IoutError, OSError):
     """A checkpoint cannot be written or read; the message names the folder and the cause."""
+
+
+class ResultFileError(IoutError, ValueError):
+    """A file a command reads (evaluation results, traces, a benchmark run, a run's state) is
+    missing, unreadable or malformed; the message names the file and what is wrong."""
