@@ -65,3 +65,24 @@ def test_shared_policy_example_runs(tmp_path):
         check=True,
     )
     assert '"mean_aoi_horizon"' in out.stdout and (tmp_path / "result.json").is_file()
+
+
+@pytest.mark.parametrize(
+    ("actions", "match"),
+    [
+        # 5 and 3 entries: together 8, the joint size, which must not shift between agents
+        ({"auv_0": [5, 3, 0, 0, 1], "auv_1": [5, 3, 0]}, r"actions\['auv_0'\] has shape \(5,\)"),
+        ({"auv_0": [5, 3, 0, 0], "auv_1": [5, 3, 0]}, r"actions\['auv_1'\] has shape \(3,\)"),
+        ({"auv_0": [5, 3, 0, 0], "auv_1": [5, 3, 7, 0]}, r"actions\['auv_1'\] = \[5, 3, 7, 0\]"),
+        ({"auv_0": [5, 3, 0, -1], "auv_1": [5, 3, 0, 0]}, r"auv_0.*accepted integers from 0"),
+        ({"auv_0": [5, 3, 0.5, 0], "auv_1": [5, 3, 0, 0]}, r"auv_0.*accepted integers"),
+        ({"auv_0": [5, 3, 0, 0], "auv_1": [5, 3, 0, 0], "auv_2": [0] * 4}, r"\['auv_2'\]"),
+    ],
+)
+def test_each_agents_action_is_checked_on_its_own(actions, match):
+    env = iout_mj.parallel_env(n_auvs=2, n_nodes=7)
+    env.reset(seed=0)
+    before = env.state().copy()
+    with pytest.raises(ValueError, match=match):
+        env.step(actions)
+    np.testing.assert_array_equal(env.state(), before)  # nothing moved

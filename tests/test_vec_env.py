@@ -168,3 +168,41 @@ def test_physics_batch_places_each_envs_own_layout_and_current(cfg):
         np.testing.assert_allclose(p.positions_m(), m.state.positions_m[e])
     assert not np.array_equal(m.state.current_mps[0], m.state.current_mps[1])
     venv.close()
+
+
+def test_threads_are_capped_by_the_cpus_this_process_may_use(cfg):
+    from iout_mj.envs.gym_vector import MultiAUVVectorEnv
+    from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
+    from iout_mj.runtime import usable_cpus
+
+    too_many = usable_cpus() + 1
+    accepted = rf"nthread={too_many} is invalid: accepted an integer from 0 to {usable_cpus()}"
+    for make in (
+        lambda: PhysicsVecEnv(2, config=cfg, nthread=too_many),
+        lambda: MultiAUVVectorEnv(2, backend="mujoco", config=cfg, nthread=too_many),
+        lambda: ScenarioVecEnv([(7, cfg)], 1, "mujoco", nthread=too_many),
+    ):
+        with pytest.raises(ValueError, match=accepted):
+            make()
+    venv = PhysicsVecEnv(2, config=cfg, nthread=usable_cpus())  # the most is still accepted
+    venv.close()
+
+
+def test_a_closed_vec_env_refuses_to_step_or_reset(cfg):
+    from iout_mj.envs.gym_vector import MultiAUVVectorEnv
+    from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
+
+    for venv in (
+        PhysicsVecEnv(2, config=cfg),
+        KinematicVecEnv(2, config=cfg),
+        ScenarioVecEnv([(7, cfg)], 2, "mujoco"),
+        MultiAUVVectorEnv(2, backend="mujoco", config=cfg),
+    ):
+        venv.reset()
+        actions = np.zeros((2, *venv.action_space.shape[-1:]), dtype=np.int64)
+        venv.close()
+        venv.close()  # closing twice is harmless
+        with pytest.raises(RuntimeError, match="is closed: make a new one"):
+            venv.step(actions)
+        with pytest.raises(RuntimeError, match="is closed"):
+            venv.reset()

@@ -19,6 +19,7 @@ from gymnasium.vector.utils import batch_space
 
 from iout_mj.envs.batch import MissionBatch
 from iout_mj.envs.gym_env import spaces
+from iout_mj.runtime import cpu_bounded
 from iout_mj.scenarios import ConfigLike
 
 
@@ -28,8 +29,11 @@ class MultiAUVVectorEnv(VectorEnv):
     Args:
         num_envs: B.
         n_auvs, n_nodes, backend, layout, config: as for `gymnasium.make`.
-        nthread: C threads of the MuJoCo rollout (0: the calling thread).
+        nthread: C threads of the MuJoCo rollout (0: the calling thread; at most the CPUs
+            this process may use).
         render_mode: None (rendering is per env: use `gymnasium.make`).
+
+    Stepping or resetting after `close()` raises `RuntimeError`.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}  # noqa: RUF012
@@ -49,6 +53,7 @@ class MultiAUVVectorEnv(VectorEnv):
             raise ValueError(
                 f"render_mode={render_mode!r}: the vector env does not render; accepted None"
             )
+        nthread = cpu_bounded(nthread, "nthread", 0)
         self.batch = MissionBatch(num_envs, backend, n_auvs, n_nodes, layout, config, None, nthread)
         self.mission = self.batch.mission
         self.num_envs = self.batch.n_envs
@@ -62,6 +67,7 @@ class MultiAUVVectorEnv(VectorEnv):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start every environment; `seed` (an int) seeds the batch's one RNG."""
+        self._check_open()
         if isinstance(seed, list):
             raise ValueError(
                 "seed: accepted one integer for the whole batch (it draws every environment's "
@@ -78,6 +84,7 @@ class MultiAUVVectorEnv(VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        self._check_open()
         if self._needs_reset:
             raise RuntimeError("step() before reset(): call reset() first")
         step = self.batch.step(actions)
@@ -91,6 +98,10 @@ class MultiAUVVectorEnv(VectorEnv):
         for e, (final_obs, final) in step.ended.items():
             infos = self._add_info(infos, {"final_obs": final_obs, "final_info": final}, e)
         return step.obs, step.rewards, step.terminated, step.truncated, infos
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise RuntimeError(f"this {type(self).__name__} is closed: make a new one to step it")
 
     def close_extras(self, **kwargs: Any) -> None:
         self.batch.close()

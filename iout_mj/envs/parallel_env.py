@@ -18,6 +18,7 @@ from pettingzoo import ParallelEnv
 
 from iout_mj.envs.gym_env import MultiAUVEnv
 from iout_mj.mission import OBS_HIGH, OBS_LOW, Mission
+from iout_mj.mission.actions import ACTION_FIELDS, ActionError
 from iout_mj.mission.observation import node_energy_level
 from iout_mj.scenarios import ConfigLike
 from iout_mj.world.geometry import unit_xy
@@ -115,11 +116,36 @@ class MultiAUVParallelEnv(ParallelEnv):
         self.agents = list(self.possible_agents)
         return self._observe(), self._infos({})
 
+    def _agent_action(self, agent: str, action: Any) -> np.ndarray:
+        """One agent's action, checked on its own (a wrong-sized action would otherwise shift
+        the entries of the others)."""
+        a, high = np.asarray(action), self._act_space.nvec
+        if a.shape != high.shape:
+            raise ActionError(
+                f"actions[{agent!r}] has shape {a.shape}; accepted {high.size} integers "
+                f"({', '.join(ACTION_FIELDS)})"
+            )
+        integral = a.dtype.kind in "iu" or (
+            a.dtype.kind == "f" and bool(np.all(np.isfinite(a))) and bool(np.all(a == np.round(a)))
+        )
+        if not integral or np.any(a < 0) or np.any(a >= high):
+            raise ActionError(
+                f"actions[{agent!r}] = {a.tolist()} is invalid: accepted integers from 0 to "
+                f"{(high - 1).tolist()} ({', '.join(ACTION_FIELDS)})"
+            )
+        return a.astype(np.int64)
+
     def step(self, actions: dict[str, Any]) -> tuple[Any, Any, Any, Any, Any]:
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"actions: missing for {missing}; accepted one action per agent")
-        joint = np.concatenate([np.asarray(actions[a]).ravel() for a in self.possible_agents])
+        unknown = sorted(str(a) for a in actions if a not in self.agents)
+        if unknown:
+            raise ValueError(
+                f"actions for {unknown}, which are not live agents: accepted one action for "
+                f"each of {self.agents} (after the episode ends, call reset())"
+            )
+        joint = np.concatenate([self._agent_action(a, actions[a]) for a in self.possible_agents])
         _, reward, terminated, truncated, info = self.env.step(joint)
         agents = self.agents
         obs = self._observe()

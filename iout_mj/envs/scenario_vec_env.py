@@ -14,7 +14,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepR
 
 from iout_mj.config import Config
 from iout_mj.envs.batch import MissionBatch
-from iout_mj.envs.vec_env import MissionVecEnv, step_infos
+from iout_mj.envs.vec_env import MissionVecEnv, check_open, step_infos, thread_count
 from iout_mj.mission import OBS_HIGH, OBS_LOW
 from iout_mj.mission.tokens import K_MAX, token_size
 
@@ -36,7 +36,8 @@ class ScenarioVecEnv(MissionVecEnv):
         envs_per_cell: environments of each cell.
         backend: "kinematic" or "mujoco".
         seed: seeds the one RNG of all cells.
-        nthread: C threads of each cell's MuJoCo rollout.
+        nthread: C threads of each cell's MuJoCo rollout (0 to the CPUs this process may
+            use).
     """
 
     def __init__(
@@ -50,6 +51,7 @@ class ScenarioVecEnv(MissionVecEnv):
         if not cells:
             raise ValueError("cells: accepted a non-empty list of (n_nodes, config)")
         n_auvs = cells[0][1].scenario.n_auvs
+        nthread = thread_count(nthread)
         self.batches = [
             MissionBatch(envs_per_cell, backend, n_auvs, k, "random", cfg, None, nthread, "tokens")
             for k, cfg in cells
@@ -59,6 +61,7 @@ class ScenarioVecEnv(MissionVecEnv):
         self.batch = self.batches[0]  # the RNG holder (`random`, `set_random_state`)
         self.cfg, self.mission = self.batch.cfg, self.batch.mission
         self.render_mode = None
+        self.closed = False
         self._bounds = np.cumsum([0] + [b.n_envs for b in self.batches])
         gym_obs, gym_act = token_spaces(self.cfg)
         super(MissionVecEnv, self).__init__(int(self._bounds[-1]), gym_obs, gym_act)
@@ -71,6 +74,7 @@ class ScenarioVecEnv(MissionVecEnv):
         self._reset_seeds()
 
     def reset(self) -> VecEnvObs:
+        check_open(self)
         seed = self._seeds[0]
         if seed is not None:
             self.set_random_state(np.random.RandomState(seed))
@@ -80,6 +84,7 @@ class ScenarioVecEnv(MissionVecEnv):
         return np.concatenate([b.observe() for b in self.batches])
 
     def step_wait(self) -> VecEnvStepReturn:
+        check_open(self)
         actions = np.asarray(self._actions)
         bounds = zip(self.batches, self._bounds[:-1], strict=True)
         steps = [b.step(actions[lo : lo + b.n_envs]) for b, lo in bounds]
@@ -93,3 +98,4 @@ class ScenarioVecEnv(MissionVecEnv):
     def close(self) -> None:
         for b in self.batches:
             b.close()
+        self.closed = True

@@ -24,7 +24,19 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 
 from iout_mj.envs.batch import BatchStep, MissionBatch
 from iout_mj.envs.gym_env import spaces
+from iout_mj.runtime import cpu_bounded
 from iout_mj.scenarios import ConfigLike
+
+
+def thread_count(nthread: int) -> int:
+    """`nthread` if it is from 0 (the calling thread) to the CPUs this process may use."""
+    return cpu_bounded(nthread, "nthread", 0)
+
+
+def check_open(venv: Any) -> None:
+    """Refuse to use a closed vector env (its scenes are freed)."""
+    if venv.closed:
+        raise RuntimeError(f"this {type(venv).__name__} is closed: make a new one to step it")
 
 
 def step_infos(step: BatchStep, n_envs: int) -> list[dict[str, Any]]:
@@ -47,8 +59,10 @@ class MissionVecEnv(VecEnv):
         n_envs: B, the number of environments.
         n_auvs, n_nodes, layout, config: as for `gymnasium.make("iout_mj/MultiAUV-v0", ...)`.
         seed: seeds the one RNG of the batch (also `venv.seed(s)` before `reset()`).
-        nthread: C threads of the MuJoCo rollout (0: the calling thread; at most one per core
-            helps).
+        nthread: C threads of the MuJoCo rollout (0: the calling thread; at most the CPUs
+            this process may use, `runtime.usable_cpus()`).
+
+    Stepping or resetting after `close()` raises `RuntimeError`.
     """
 
     backend = "kinematic"
@@ -64,10 +78,11 @@ class MissionVecEnv(VecEnv):
         nthread: int = 0,
     ):
         self.batch = MissionBatch(
-            n_envs, self.backend, n_auvs, n_nodes, layout, config, seed, nthread
+            n_envs, self.backend, n_auvs, n_nodes, layout, config, seed, thread_count(nthread)
         )
         self.cfg, self.mission = self.batch.cfg, self.batch.mission
         self.render_mode = None
+        self.closed = False
         super().__init__(self.batch.n_envs, *spaces(self.mission))
 
     @property
@@ -92,6 +107,7 @@ class MissionVecEnv(VecEnv):
 
     # ------------------------------------------------------------------ VecEnv
     def reset(self) -> VecEnvObs:
+        check_open(self)
         seed = self._seeds[0]
         if seed is not None:
             self.batch.random = np.random.RandomState(seed)
@@ -100,15 +116,18 @@ class MissionVecEnv(VecEnv):
         return self.mission.flat_observation()
 
     def step_async(self, actions: np.ndarray) -> None:
+        check_open(self)
         self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
+        check_open(self)
         step = self.batch.step(self._actions)
         done = step.terminated | step.truncated
         return step.obs, step.rewards.astype(np.float32), done, step_infos(step, self.num_envs)
 
     def close(self) -> None:
         self.batch.close()
+        self.closed = True
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         return [getattr(self, attr_name)] * len(self._get_indices(indices))
