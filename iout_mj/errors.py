@@ -21,6 +21,10 @@ class PolicyMismatchError(PolicyError):
     """A readable policy made for other spaces or another action mapping than the env's."""
 
 
+class PolicyFormatError(PolicyError):
+    """A policy folder is missing a file, damaged, unsafe to read, or not in this format."""
+
+
 class CheckpointError(IoutError, OSError):
     """A checkpoint cannot be written or read; the message names the folder and the cause."""
 

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
+
+from iout_mj.experiments.result_files import integer, load, mapping, number, numbers, text
+
+RATES = ("env_steps_per_s", "raw_slots_per_s", "ratio")
+"""Each scenario's slot_vs_raw entries (and the same with the batch prefix)."""
 
 
 def _physics_batch(r: dict[str, Any]) -> int:
@@ -10,7 +16,52 @@ def _physics_batch(r: dict[str, Any]) -> int:
     return int(r.get("physics_batch", 8))
 
 
+def read_result(path: Path) -> dict[str, Any]:
+    """A saved benchmark run (`iout-mj bench --out`), checked by `check_result`.
+
+    Raises:
+        ResultFileError: naming the file, the entry and what is accepted.
+    """
+    result = load(path, "accepted a file written by `iout-mj bench --out`")
+    check_result(result, str(path))
+    return result
+
+
+def check_result(r: Any, where: str = "the benchmark result") -> None:
+    """Every entry the tables read: present, of its type, finite and >= 0."""
+    r = mapping(r, where)
+    machine = mapping(r.get("machine"), f"{where}: machine")
+    integer(machine, "cpus", f"{where}: machine", 1)
+    text(machine, "python", f"{where}: machine")
+    number(r, "timestep_s", where, 0.0)
+    integer(r, "substeps_per_slot", where, 1)
+    integer(r, "kinematic_batch", where, 1)
+    if "physics_batch" in r:
+        integer(r, "physics_batch", where, 1)
+    prefix = f"batch_{_physics_batch(r)}_"
+    for key, row in mapping(r.get("slot_vs_raw"), f"{where}: slot_vs_raw").items():
+        inner = f"{where}: slot_vs_raw.{key}"
+        numbers(mapping(row, inner), [*RATES, *(prefix + k for k in RATES)], inner, 0.0)
+    batch = mapping(r.get("kinematic_steps_per_s"), f"{where}: kinematic_steps_per_s")
+    single = mapping(
+        r.get("kinematic_single_env_steps_per_s"), f"{where}: kinematic_single_env_steps_per_s"
+    )
+    numbers(batch, batch, f"{where}: kinematic_steps_per_s", 0.0)
+    numbers(single, batch, f"{where}: kinematic_single_env_steps_per_s", 0.0)
+    numbers(
+        mapping(r.get("ppo_fps"), f"{where}: ppo_fps"),
+        ("physics", "kinematic", "trivial"),
+        f"{where}: ppo_fps",
+        0.0,
+    )
+    numbers(r, ("ppo_fps_ratio", "subproc_scaling", "thread_scaling", "render_fps"), where, 0.0)
+    memory = mapping(r.get("memory"), f"{where}: memory")
+    numbers(memory, ("one_env_mb", "training_mb"), f"{where}: memory", 0.0)
+    integer(memory, "training_envs", f"{where}: memory", 1)
+
+
 def format_table(r: dict[str, Any]) -> str:
+    check_result(r)
     lines = [
         f"machine: {r['machine']['cpus']} CPUs, Python {r['machine']['python']}; physics "
         f"dt {r['timestep_s']} s, {r['substeps_per_slot']} substeps per 25 s slot",
@@ -51,6 +102,7 @@ def format_table(r: dict[str, Any]) -> str:
 
 def format_markdown(r: dict[str, Any]) -> str:
     """The README's table of one run."""
+    check_result(r)
     b = f"batch_{_physics_batch(r)}_"
     rows = ["| benchmark | value | target |", "| --- | --- | --- |"]
     for key, v in r["slot_vs_raw"].items():

@@ -3,17 +3,33 @@ table (mean AoI over T_max, their ratio, docking rates)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
+from iout_mj.errors import ResultFileError, UsageError
+from iout_mj.experiments import result_files
+
+LABELS = ("policy", "layout", "backend")
+MEASURES = ("mean_aoi_horizon", "docking_rate", "delivered_bits")
+
 
 def read_rows(results: Path) -> list[dict[str, Any]]:
-    """The summary rows of an evaluation folder (`iout-mj evaluate --out`)."""
+    """The summary rows of an evaluation folder (`iout-mj evaluate --out`), checked: every
+    cell's labels, N, K and the compared measures (finite; AoI > 0, the ratio's divisor).
+
+    Raises:
+        ResultFileError: naming the file, the row and what is wrong.
+    """
     path = results / "results.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} does not exist: accepted a folder from evaluate --out")
-    rows: list[dict[str, Any]] = json.loads(path.read_text())
+    rows = result_files.read_rows(
+        path, LABELS, MEASURES, "accepted a folder written by `iout-mj evaluate --out`"
+    )
+    for i, row in enumerate(rows):
+        if row["mean_aoi_horizon"] <= 0:
+            raise ResultFileError(
+                f"{path}: row {i}: mean_aoi_horizon is {row['mean_aoi_horizon']}: accepted a "
+                "number > 0 (an age of information)"
+            )
     return rows
 
 
@@ -42,7 +58,7 @@ def compare(rows: list[dict[str, Any]], policy: str, reference: str) -> list[dic
             }
         )
     if not out:
-        raise ValueError(f"no cell holds both {policy!r} and {reference!r}")
+        raise UsageError(f"no cell holds both {policy!r} and {reference!r}")
     return out
 
 

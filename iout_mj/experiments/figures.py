@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +12,20 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from iout_mj import palette
+from iout_mj.errors import ResultFileError
+from iout_mj.experiments.result_files import (
+    array,
+    integer,
+    listing,
+    load,
+    mapping,
+    number,
+    read_rows,
+    text,
+)
+
+MEASURES = ("jain", "mean_aoi", "propulsion_energy_j")
+"""What the results figures plot from each evaluation row."""
 
 
 def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: Any = None) -> None:
@@ -79,20 +92,21 @@ def speed_heading_figure(traces: dict[str, dict[str, Any]], path: Path) -> None:
 
 
 def figures_from_results(results: Path, out: Path) -> list[Path]:
-    """All figures from a folder written by `iout-mj evaluate --out`."""
-    path = results / "results.json"
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"{path} does not exist: run `iout-mj evaluate --out {results}` first"
-        )
-    rows = json.loads(path.read_text())
-    paths = results_figures(rows, out)
+    """All figures from a folder written by `iout-mj evaluate --out`.
+
+    Raises:
+        ResultFileError: results.json or traces.json is missing a key, holds a non-finite
+            number or is not JSON (the message names the file and the entry).
+    """
+    hint = f"run `iout-mj evaluate --out {results}` first"
+    rows = read_rows(results / "results.json", ("policy",), MEASURES, hint)
     traces_path = results / "traces.json"
-    traces = json.loads(traces_path.read_text()) if traces_path.is_file() else {}
+    traces = read_traces(traces_path) if traces_path.exists() else {}
+    paths = results_figures(rows, out)
     if traces:
         cols = min(4, len(traces))
-        rows = -(-len(traces) // cols)
-        fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 4.6 * rows), squeeze=False)
+        lines = -(-len(traces) // cols)
+        fig, axes = plt.subplots(lines, cols, figsize=(4.4 * cols, 4.6 * lines), squeeze=False)
         for ax in axes.ravel()[len(traces) :]:
             ax.set_visible(False)
         for ax, (label, tr) in zip(axes.ravel(), sorted(traces.items()), strict=False):
@@ -111,14 +125,57 @@ def figures_from_results(results: Path, out: Path) -> list[Path]:
     return paths
 
 
+def read_traces(path: Path) -> dict[str, dict[str, Any]]:
+    """traces.json (`evaluate.save`): label -> `Mission.trace()`, every array of its shape
+    and finite."""
+    traces = mapping(load(path, "written by `iout-mj evaluate --out`"), str(path))
+    for label, trace in traces.items():
+        check_trace(trace, f"{path}: trace {label!r}")
+    return traces
+
+
+def check_trace(trace: Any, where: str) -> None:
+    """The entries the trajectory and speed figures read, with consistent shapes."""
+    trace = mapping(trace, where)
+    pos = array(trace, "positions_m", where, (None, None, 2))
+    steps, n_auvs = pos.shape[:2]
+    if steps < 1 or n_auvs < 1:
+        raise ResultFileError(f"{where}: positions_m is empty: accepted at least one position")
+    for key in ("headings_rad", "speeds_mps"):
+        array(trace, key, where, (steps, n_auvs))
+    n_nodes = array(trace, "nodes_m", where, (None, 2)).shape[0]
+    array(trace, "delivered_bits_per_node", where, (n_nodes,))
+    array(trace, "dock_center_m", where, (2,))
+    if np.any(array(trace, "area_m", where, (2,)) <= 0):
+        raise ResultFileError(f"{where}: area_m must be two sizes > 0")
+    number(trace, "dock_radius_m", where, 0.0)
+    number(trace, "slot_s", where, 0.0)
+
+
+def read_history(run: Path) -> list[dict[str, Any]]:
+    """The evaluation history of a training run (its state.json), each entry checked."""
+    path = run / "state.json"
+    state = mapping(load(path, "accepted a training run folder (`iout-mj train --out`)"), str(path))
+    history = listing(state.get("history"), f"{path}: history")
+    for i, raw in enumerate(history):
+        where = f"{path}: history[{i}]"
+        entry = mapping(raw, where)
+        integer(entry, "num_timesteps", where)
+        text(entry, "backend", where)
+        for key in (
+            "mean_aoi_horizon",
+            "jain",
+            "docking_rate" if "docked" not in entry else "docked",
+        ):
+            number(entry, key, where)
+    return history
+
+
 def training_curves(runs: list[Path], path: Path) -> Path:
     """Held-out evaluation during training (from each run's state.json) against steps."""
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
-    for run in runs:
-        state = run / "state.json"
-        if not state.is_file():
-            raise FileNotFoundError(f"{state} does not exist: not a training run folder")
-        hist = json.loads(state.read_text())["history"]
+    histories = [(run, read_history(run)) for run in runs]  # every file checked before drawing
+    for run, hist in histories:
         steps = np.array([h["num_timesteps"] for h in hist]) / 1e3
         for ax, key in zip(axes, ("mean_aoi_horizon", "jain", "docking_rate"), strict=True):
             ax.plot(steps, [h.get(key, h.get("docked")) for h in hist], marker=".", label=run.name)

@@ -6,14 +6,22 @@ self-describing), `state.json` (a copy of the last run state, for people and fig
 TensorBoard logs under `tb/`. A training checkpoint adds the optimizer state and every RNG
 (torch, numpy's global one that SB3's minibatches draw from, the environments' batch RNG) to
 the weights file, so `--resume` continues the schedule, the statistics and the random streams.
+
+Every file of a checkpoint is covered by a checksum (`policy_format`): an edited run state is
+refused on resume with the file's name, not trained on. A write is whole or not at all; a
+fault (no space left, file too large) raises one `CheckpointError` with the OS's reason and
+leaves the previous checkpoint and no temporary folder; after a kill, `recover` keeps the
+complete checkpoint, old or new, and removes the partial one.
 """
 
 from __future__ import annotations
 
 import ast
 import json
+import math
+import os
 import random
-import shutil
+import stat
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,16 +30,15 @@ import numpy as np
 import torch
 
 from iout_mj.agents.policy_format import (
-    MANIFEST,
-    NORMALIZATION,
-    PolicyFormatError,
+    build_policy,
     normalization_dict,
     read_manifest,
+    read_normalization,
     read_tensors,
     save_policy,
-    write_atomic,
 )
-from iout_mj.errors import CheckpointError
+from iout_mj.errors import CheckpointError, PolicyError
+from iout_mj.files import remove, write_atomic
 from iout_mj.training.config import TrainConfig
 
 
@@ -45,7 +52,48 @@ class RunState:
     history: list[dict[str, Any]] = field(default_factory=list)
 
     def save(self, path: Path) -> None:
-        write_atomic(path, (json.dumps(asdict(self), indent=1) + "\n").encode())
+        """The copy for people and figures, replaced whole; a fault raises `CheckpointError`."""
+        try:
+            write_atomic(path, (json.dumps(asdict(self), indent=1) + "\n").encode())
+        except OSError as exc:
+            raise CheckpointError(f"cannot write {path}: {exc.strerror or exc}") from exc
+
+
+def _count(value: Any, name: str, high: float = math.inf) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
+        raise ValueError(f"{name} is {value!r:.60}; accepted an integer in [0, {high}]")
+    return value
+
+
+def _run_state(manifest: dict[str, Any], cfg: TrainConfig | None = None) -> RunState:
+    """The manifest's run state, checked (and against the run's config when given)."""
+    raw = manifest.get("run_state")
+    if not isinstance(raw, dict) or set(raw) != {"phase", "num_timesteps", "best_score", "history"}:
+        raise ValueError("run_state must hold phase, num_timesteps, best_score and history")
+    phases = len(cfg.phases) if cfg else math.inf
+    # a phase ends at its step count or within the rollout that crosses it
+    steps = cfg.total_timesteps + cfg.n_steps * cfg.n_envs if cfg else math.inf
+    best = raw["best_score"]
+    if not isinstance(best, int | float) or isinstance(best, bool) or not math.isfinite(best):
+        raise ValueError(f"run_state.best_score is {best!r:.60}; accepted a finite number")
+    history = raw["history"]
+    if not isinstance(history, list) or not all(isinstance(h, dict) for h in history):
+        raise ValueError("run_state.history must be a list of evaluation entries")
+    return RunState(
+        _count(raw["phase"], "run_state.phase", phases),
+        _count(raw["num_timesteps"], "run_state.num_timesteps", steps),
+        float(best),
+        history,
+    )
+
+
+def read_run_state(folder: Path, cfg: TrainConfig) -> RunState:
+    """The run state of a checkpoint to resume with `cfg`, checked (phase and steps within the
+    config's); raises `CheckpointError` saying what is wrong."""
+    try:
+        return _run_state(read_manifest(folder), cfg)
+    except (PolicyError, ValueError) as exc:
+        raise CheckpointError(f"cannot resume from {folder}: {exc}") from exc
 
 
 def _rng_tensors(batch_rng: np.random.RandomState) -> tuple[dict[str, torch.Tensor], Any]:
@@ -107,30 +155,38 @@ def save_checkpoint(
     }
     try:
         save_policy(folder, model.policy, normalization_dict(venv), manifest, tensors)
-    except OSError as exc:
-        shutil.rmtree(folder.with_name(folder.name + ".tmp"), ignore_errors=True)
+    except PolicyError as exc:
+        cause = exc.__cause__
+        reason = (cause.strerror or str(cause)) if isinstance(cause, OSError) else str(exc)
         raise CheckpointError(
-            f"cannot write checkpoint {folder}: {exc.strerror or exc}; the previous "
-            f"checkpoint (if any) is kept"
+            f"cannot write checkpoint {folder}: {reason}; the previous checkpoint (if any) is kept"
         ) from exc
 
 
+def _complete(folder: Path) -> bool:
+    """A folder (not a link) holding a checkpoint whose every checksum holds."""
+    try:
+        if not stat.S_ISDIR(os.lstat(folder).st_mode):
+            return False
+        read_manifest(folder)
+    except (OSError, PolicyError):
+        return False
+    return True
+
+
 def recover(folder: Path) -> None:
-    """After a kill during `save_checkpoint`: put back a complete `<folder>.tmp` (the newer
-    checkpoint) or `<folder>.old` (the older) where `folder` is missing."""
-    if (folder / MANIFEST).is_file():
-        return
-    for candidate in (
-        folder.with_name(folder.name + ".tmp"),
-        folder.with_name(folder.name + ".old"),
-    ):
-        try:
-            read_manifest(candidate)
-        except PolicyFormatError:
-            continue
-        shutil.rmtree(folder, ignore_errors=True)
-        candidate.rename(folder)
-        return
+    """After a kill during `save_checkpoint`: keep a complete `folder`; where it is missing, put
+    back the complete `<folder>.tmp` (the newer checkpoint) or `<folder>.old` (the older).
+    Partial leftovers are removed; a damaged `folder` is left for loading to report."""
+    leftovers = [folder.with_name(folder.name + suffix) for suffix in (".tmp", ".old")]
+    if not os.path.lexists(folder):
+        for candidate in leftovers:
+            if _complete(candidate):
+                candidate.rename(folder)
+                break
+    if _complete(folder):
+        for leftover in leftovers:
+            remove(leftover)
 
 
 @dataclass
@@ -143,13 +199,42 @@ class Resumed:
 
 def restore(model: Any, folder: Path) -> Resumed:
     """Load a checkpoint into `model` (built by the trainer with the same config): weights,
-    optimizer, step counts, normalisation statistics and every RNG."""
+    optimizer, step counts, normalisation statistics and every RNG.
+
+    Raises:
+        CheckpointError: a file is missing, unsafe or damaged, or the checkpoint does not fit
+            the model (the message names the folder and the cause).
+    """
     try:
         manifest = read_manifest(folder)
-        tensors = read_tensors(folder)
-        norm = json.loads((folder / "normalization.json").read_text())
-    except (PolicyFormatError, OSError, json.JSONDecodeError) as exc:
+        tensors = read_tensors(folder, manifest)
+        norm = read_normalization(folder, manifest)
+    except PolicyError as exc:
         raise CheckpointError(f"cannot resume from {folder}: {exc}") from exc
+    try:
+        return _restore(model, manifest, tensors, norm)
+    except (
+        KeyError,
+        TypeError,
+        ValueError,
+        IndexError,
+        RuntimeError,
+        SyntaxError,
+        RecursionError,
+    ) as exc:
+        raise CheckpointError(
+            f"cannot resume from {folder}: it does not fit this run ({type(exc).__name__}: "
+            f"{str(exc)[:200]})"
+        ) from exc
+
+
+def _restore(
+    model: Any, manifest: dict[str, Any], tensors: dict[str, torch.Tensor], norm: dict[str, Any]
+) -> Resumed:
+    state = _run_state(manifest)
+    python_rng = ast.literal_eval(manifest["rng"]["python"])  # a tuple literal, no eval
+    num_timesteps = _count(manifest["num_timesteps"], "num_timesteps")
+    n_updates = _count(manifest["n_updates"], "n_updates")
     model.policy.load_state_dict(
         {k[len("policy.") :]: v for k, v in tensors.items() if k.startswith("policy.")}
     )
@@ -161,8 +246,7 @@ def restore(model: Any, folder: Path) -> Resumed:
     model.policy.optimizer.load_state_dict(
         {"state": opt_state, "param_groups": manifest["optimizer_param_groups"]}
     )
-    model.num_timesteps = manifest["num_timesteps"]
-    model._n_updates = manifest["n_updates"]
+    model.num_timesteps, model._n_updates = num_timesteps, n_updates
     venv = model.get_vec_normalize_env()
     venv.obs_rms.mean = np.asarray(norm["obs_mean"])
     venv.obs_rms.var = np.asarray(norm["obs_var"])
@@ -170,8 +254,8 @@ def restore(model: Any, folder: Path) -> Resumed:
     venv.ret_rms.mean, venv.ret_rms.var = np.float64(norm["ret_mean"]), np.float64(norm["ret_var"])
     venv.ret_rms.count = norm["ret_count"]
     env_rng = _restore_rngs(tensors, manifest["rng"])
-    random.setstate(ast.literal_eval(manifest["rng"]["python"]))  # a tuple literal, no eval
-    return Resumed(RunState(**manifest["run_state"]), env_rng)
+    random.setstate(python_rng)
+    return Resumed(state, env_rng)
 
 
 TRAINING_ONLY = ("run_state", "num_timesteps", "n_updates", "optimizer_param_groups", "rng")
@@ -182,14 +266,11 @@ def export_policy(checkpoint: Path, out: Path) -> dict[str, Any]:
     """A checkpoint as a policy to ship: its network and normalisation, its manifest without
     the optimizer, RNG and run state, with the evaluation it was selected on."""
     try:
-        manifest = read_manifest(checkpoint)
-        tensors = read_tensors(checkpoint)
-        normalization = json.loads((checkpoint / NORMALIZATION).read_text())
-    except (PolicyFormatError, OSError, json.JSONDecodeError) as exc:
+        manifest = read_manifest(checkpoint)  # the network's sizes bounded before it is built
+        normalization = read_normalization(checkpoint, manifest)
+        policy = build_policy(manifest, read_tensors(checkpoint, manifest))
+    except PolicyError as exc:
         raise CheckpointError(f"cannot export {checkpoint}: {exc}") from exc
-    from iout_mj.agents.policy_format import build_policy
-
-    policy = build_policy(manifest, tensors)
     kept = {
         k: v for k, v in manifest.items() if k not in (*TRAINING_ONLY, "files", "eval", "env_phase")
     }
