@@ -1,5 +1,8 @@
 """Validation of the paper's cubic propulsion model against MuJoCo-measured actuator power.
 
+Every speed tested comes from the config's V_max (and dv_max): a speed above V_max would
+only measure the thrust limit, not the model.
+
 Steady state: one AUV holds each speed; measured electrical power = mean |thrust x surge
 velocity| / eta_prop + H. Manoeuvres: setpoint sequences (one entry per 25 s slot), measured
 energy per slot (thrust and yaw, over eta_prop, plus H) against the paper's eq. 13 with the
@@ -9,6 +12,7 @@ slot's commanded speed and measured distance. Timestep: every manoeuvre again at
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,7 +27,8 @@ from iout_mj.experiments.figures import energy_validation_figure
 from iout_mj.scenarios import make_config
 from iout_mj.world import propulsion
 
-STEADY_SPEEDS_MPS = tuple(np.arange(1, 9) * 0.5)
+STEADY_POINTS = 8
+"""Steady speeds tested: V_max / 8 to V_max in equal steps (0.5 to 4 m/s for the paper's)."""
 SETTLE_S = 100.0
 MEASURE_S = 25.0
 TIMESTEP_CANDIDATES_S = (0.25, 0.1, 0.05, 0.025)
@@ -42,9 +47,16 @@ class Maneuver:
     start_heading_deg: float = 0.0
 
 
-def _mission_maneuver() -> Maneuver:
-    """The setpoints of one full planner mission (kinematic backend, N = 1, K = 7, seed 0)."""
-    env = KinematicEnvironment(make_config(1, 7), seed=0)
+def steady_speeds_mps(cfg: Config) -> tuple[float, ...]:
+    """The steady-state speeds of the config: `STEADY_POINTS` up to its V_max."""
+    v_max = cfg.motion.v_max_mps
+    return tuple(float(v_max * i / STEADY_POINTS) for i in range(1, STEADY_POINTS + 1))
+
+
+def _mission_maneuver(cfg: Config) -> Maneuver:
+    """The setpoints of one full planner mission (kinematic backend, N = 1, K = 7, seed 0)
+    with the config's motion."""
+    env = KinematicEnvironment(make_config(1, 7, base=cfg), seed=0)
     policy = make_policy("planner")
     env.reset()
     start = env.mission.state.positions_m[0].copy()
@@ -58,7 +70,7 @@ def _mission_maneuver() -> Maneuver:
             break
     return Maneuver(
         "mission (planner, K=7)",
-        1.0,
+        cfg.motion.initial_speed_mps,
         tuple(headings),
         tuple(speeds),
         (float(start[0]), float(start[1])),
@@ -78,18 +90,23 @@ def commandable(man: Maneuver, cfg: Config) -> bool:
     )
 
 
-def maneuvers() -> list[Maneuver]:
+def maneuvers(cfg: Config | None = None) -> list[Maneuver]:
+    """The manoeuvres at the config's speeds (the paper's: V_max 4 m/s, dv_max 0.4 m/s): full
+    speed, a dv_max ramp to it, turns at half of it, a slowdown from three quarters of it."""
+    cfg = cfg or make_config(1, 7)
+    v_max, dv = cfg.motion.v_max_mps, cfg.motion.dv_max_mps
+    half, fast = v_max / 2, 0.75 * v_max
     zigzag = tuple(25.0 * (i % 2) for i in range(8))
-    slowdown = tuple(max(3.0 - 0.4 * i, 0.0) for i in range(9))
-    ramp = tuple(round(0.4 * (i + 1), 1) for i in range(10))
+    slowdown = tuple(max(fast - dv * i, 0.0) for i in range(math.ceil(fast / dv - 1e-9) + 1))
+    ramp = tuple(min(round(dv * (i + 1), 6), v_max) for i in range(math.ceil(v_max / dv - 1e-9)))
     return [
-        Maneuver("accelerate 0 to 4 m/s", 0.0, (0.0,) * 3, (4.0,) * 3),
-        Maneuver("accelerate 0.4 m/s per slot", 0.0, (0.0,) * len(ramp), ramp),
-        Maneuver("90 deg turn at 2 m/s", 2.0, (90.0, 90.0), (2.0, 2.0)),
-        Maneuver("turn 25 deg per slot to 90", 2.0, (25.0, 50.0, 75.0, 90.0, 90.0), (2.0,) * 5),
-        Maneuver("zig-zag +-25 deg at 2 m/s", 2.0, zigzag, (2.0,) * len(zigzag)),
-        Maneuver("slowdown 3 m/s to dock", 3.0, (0.0,) * len(slowdown), slowdown),
-        _mission_maneuver(),
+        Maneuver(f"accelerate 0 to {v_max:g} m/s", 0.0, (0.0,) * 3, (v_max,) * 3),
+        Maneuver(f"accelerate {dv:g} m/s per slot", 0.0, (0.0,) * len(ramp), ramp),
+        Maneuver(f"90 deg turn at {half:g} m/s", half, (90.0, 90.0), (half, half)),
+        Maneuver("turn 25 deg per slot to 90", half, (25.0, 50.0, 75.0, 90.0, 90.0), (half,) * 5),
+        Maneuver(f"zig-zag +-25 deg at {half:g} m/s", half, zigzag, (half,) * len(zigzag)),
+        Maneuver(f"slowdown {fast:g} m/s to dock", fast, (0.0,) * len(slowdown), slowdown),
+        _mission_maneuver(cfg),
     ]
 
 
@@ -98,8 +115,10 @@ def _physics(cfg: Config, dt_s: float) -> AUVPhysics:
     return AUVPhysics.from_config(cfg)
 
 
-def steady_state(cfg: Config, speeds_mps: tuple[float, ...] = STEADY_SPEEDS_MPS) -> list[dict]:
-    """Measured vs model electrical power at constant speeds."""
+def steady_state(cfg: Config, speeds_mps: tuple[float, ...] | None = None) -> list[dict]:
+    """Measured vs model electrical power at constant speeds (default `steady_speeds_mps`)."""
+    if speeds_mps is None:
+        speeds_mps = steady_speeds_mps(cfg)
     physics = _physics(cfg, cfg.physics.timestep_s)
     m = cfg.motion
     settle, measure = round(SETTLE_S / physics.dt_s), round(MEASURE_S / physics.dt_s)
@@ -179,7 +198,7 @@ def timestep_change(cfg: Config, mans: list[Maneuver], dt_s: float) -> float:
 def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str, Any]:
     """Run the whole validation; optionally draw the figure."""
     cfg = cfg or make_config(1, 7)
-    mans = maneuvers()
+    mans = maneuvers(cfg)
     steady = steady_state(cfg)
     man_rows, traces = [], []
     for man in mans:
