@@ -20,15 +20,44 @@ from iout_mj.schema import (
     ConfigError,
     build_dataclass,
     check_finite,
-    fraction,
+    in_range,
     load_mapping,
-    positive,
     require,
     to_plain,
 )
 
 MAX_AUVS = 4
 MIN_NODES, MAX_NODES = 2, 30
+MAX_SPEED_MPS = 20.0
+"""Vehicle speeds and currents: the MuJoCo hull is validated up to here (fast torpedoes)."""
+MAX_AREA_M = 20_000.0
+"""Side of the operating area: with absorption at MAX_FREQUENCY_KHZ over its diagonal the
+uplink need stays below 1e190 J (float64 overflows at 1e308)."""
+MAX_FREQUENCY_KHZ = 200.0
+"""Acoustic frequencies: Thorp's absorption is 51 dB/km here (see MAX_AREA_M)."""
+FREQUENCY_WHY = "higher, Thorp's absorption over the area's diagonal overflows the uplink energy"
+MAX_DURATION_S = 3600.0
+"""Slot and charging/uplink periods."""
+MAX_HORIZON_SLOTS = 10_000
+"""The log holds every slot (about 200 bytes per slot and env for 4 AUVs)."""
+MAX_WEIGHT = 1e6
+"""Reward weights: every term (quantities up to ~1e10) and their sum stay far inside float32."""
+MAX_SUBSTEPS_PER_SLOT = 10_000
+"""MuJoCo substeps per slot: the stepper records each one (about 700 bytes per scene with 4
+AUVs), so a slot of a 36-scene batch stays under 300 MB."""
+MAX_FLOW_STEP_M = 2.5
+"""Water-relative travel of a hull in one physics timestep (fastest flow x timestep): the
+fins' lift diverges beyond about a hull length (3 m); measured stable at 2.5 m, divergent at
+5 m."""
+MAX_DRAG_STEP_KG = 20.0
+"""drag_factor x fastest flow x timestep, the drag's momentum change per unit speed in one
+explicit step, as a mass: a small part of the 247 kg hull, or Euler overshoots (measured:
+divergent from about 60 kg with a cross current, 150 kg without)."""
+MAX_SPECTRAL_EFFICIENCY = 64.0
+"""data_rate_bps / bandwidth_hz: 2^64 - 1 is an SNR of 193 dB, beyond any modem."""
+MIN_DRAG_FACTOR_NSPM2 = 4.5
+"""Half the paper's 9 N s^2/m^2: with less drag the fixed 150 N m yaw servo and the fins
+carry the hull sideways faster than V_max allows for (speed over ground up to 4.5 V_max)."""
 
 
 @dataclass(frozen=True)
@@ -51,31 +80,38 @@ class MotionConfig:
 
     def __post_init__(self) -> None:
         check_finite(self)
-        positive(
+        in_range(
             self,
             "v_max_mps",
-            "drag_coefficient",
-            "wetted_area_m2",
-            "water_density_kgpm3",
-            "dtheta_max_deg",
-            "dv_max_mps",
-            "battery_j",
+            0.5,
+            MAX_SPEED_MPS,
+            "slower, the hull's own yaw manoeuvres exceed the speed scale of the observation",
         )
-        fraction(self, "prop_efficiency")
-        require(self.hotel_power_w >= 0, "hotel_power_w", self.hotel_power_w, "a number >= 0")
+        in_range(self, "drag_coefficient", 1e-3, 0.1, "skin friction to a blunt hull")
+        in_range(self, "wetted_area_m2", 0.5, 30.0, "the 3 m hull has about 3 m^2")
+        in_range(self, "water_density_kgpm3", 900.0, 1100.0, "liquid water")
+        in_range(self, "prop_efficiency", 0.05, 1.0)
+        in_range(self, "hotel_power_w", 0.0, 1e5)
+        in_range(self, "dtheta_max_deg", 0.0, 180.0, low_open=True)
+        in_range(self, "dv_max_mps", 0.0, MAX_SPEED_MPS, low_open=True)
+        in_range(self, "battery_j", 0.0, 1e12, low_open=True)
         for name in ("heading_levels", "speed_levels"):
             value = getattr(self, name)
             require(
-                value >= 3 and value % 2 == 1,
+                3 <= value <= 101 and value % 2 == 1,
                 name,
                 value,
-                "an odd integer >= 3 (so that the middle level is 'no change')",
+                "an odd integer from 3 to 101 (the middle level is 'no change'; the policy "
+                "has one output per level)",
             )
+        in_range(self, "initial_speed_mps", 0.0, self.v_max_mps, "up to v_max_mps")
         require(
-            0 <= self.initial_speed_mps <= self.v_max_mps,
-            "initial_speed_mps",
-            self.initial_speed_mps,
-            f"a speed in [0, v_max_mps={self.v_max_mps}]",
+            self.drag_factor_nspm2 >= MIN_DRAG_FACTOR_NSPM2,
+            "drag_coefficient",
+            self.drag_coefficient,
+            f"rho*C_d*S/2 >= {MIN_DRAG_FACTOR_NSPM2} N s^2/m^2 (here "
+            f"{self.drag_factor_nspm2:.3g}: less drag lets the hull's own yaw manoeuvres "
+            "carry it faster than V_max)",
         )
 
     @property
@@ -116,33 +152,37 @@ class AcousticsConfig:
 
     def __post_init__(self) -> None:
         check_finite(self)
-        positive(
+        for name in ("f_wet_khz", "f_data_khz"):
+            in_range(self, name, 0.1, MAX_FREQUENCY_KHZ, FREQUENCY_WHY)
+        in_range(self, "p_tx_w", 1e-3, 1e6)
+        for name in ("eta_tx", "eta_harv"):
+            in_range(self, name, 0.01, 1.0)
+        for name in ("di_tx_db", "di_rx_db"):
+            in_range(self, name, 0.0, 40.0, "dB over an omnidirectional transducer")
+        in_range(self, "spreading_factor", 1.0, 2.0, "cylindrical to spherical spreading")
+        in_range(self, "rvs_db", -250.0, -100.0, "dB re 1 V/uPa")
+        in_range(self, "load_resistance_ohm", 0.1, 1e6)
+        in_range(self, "n_hydrophones", 1, 1000)
+        in_range(self, "bandwidth_hz", 1.0, 1e6)
+        in_range(
             self,
-            "f_wet_khz",
-            "f_data_khz",
-            "p_tx_w",
-            "spreading_factor",
-            "load_resistance_ohm",
-            "bandwidth_hz",
             "data_rate_bps",
-            "charging_s",
-            "data_s",
+            1.0,
+            MAX_SPECTRAL_EFFICIENCY * self.bandwidth_hz,
+            f"at most {MAX_SPECTRAL_EFFICIENCY:g} bit/s per Hz of bandwidth_hz: the required "
+            "SNR 2^(R/B) - 1 overflows at 1024",
         )
-        fraction(self, "eta_tx", "eta_harv")
-        require(self.n_hydrophones >= 1, "n_hydrophones", self.n_hydrophones, "an integer >= 1")
+        for name in ("charging_s", "data_s"):
+            in_range(self, name, 0.0, MAX_DURATION_S, low_open=True)
         require(
             self.noise_model in ("flat", "wenz"),
             "noise_model",
             self.noise_model,
             "'flat' or 'wenz'",
         )
-        require(
-            0 <= self.shipping_activity <= 1,
-            "shipping_activity",
-            self.shipping_activity,
-            "a number in [0, 1]",
-        )
-        require(self.wind_speed_mps >= 0, "wind_speed_mps", self.wind_speed_mps, "a number >= 0")
+        in_range(self, "noise_level_db", 0.0, 150.0, "dB re 1 uPa^2/Hz")
+        in_range(self, "shipping_activity", 0.0, 1.0)
+        in_range(self, "wind_speed_mps", 0.0, 100.0)
 
 
 @dataclass(frozen=True)
@@ -155,14 +195,9 @@ class NetworkConfig:
 
     def __post_init__(self) -> None:
         check_finite(self)
-        require(self.k_reset >= 1, "k_reset", self.k_reset, "an integer >= 1")
-        require(self.aoi_max >= 1, "aoi_max", self.aoi_max, "a number >= 1")
-        require(
-            self.node_initial_energy_j >= 0,
-            "node_initial_energy_j",
-            self.node_initial_energy_j,
-            "a number >= 0",
-        )
+        in_range(self, "k_reset", 1, MAX_HORIZON_SLOTS, "deliveries per AoI reset")
+        in_range(self, "aoi_max", 1.0, 1e6, "slots")
+        in_range(self, "node_initial_energy_j", 0.0, 1e9)
 
 
 @dataclass(frozen=True)
@@ -202,8 +237,7 @@ class RewardWeights:
     def __post_init__(self) -> None:
         check_finite(self)
         for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            require(math.isfinite(value), f.name, value, "a finite number")
+            in_range(self, f.name, -MAX_WEIGHT, MAX_WEIGHT)
 
 
 @dataclass(frozen=True)
@@ -227,11 +261,19 @@ class RewardConfig:
 
     def __post_init__(self) -> None:
         check_finite(self)
-        for f in dataclasses.fields(self):
-            if f.name != "weights":
-                value = getattr(self, f.name)
-                require(math.isfinite(value) and value >= 0, f.name, value, "a finite number >= 0")
-        positive(self, "collision_sigma_m", "margin_epsilon_j")
+        in_range(self, "fairness_min_deliveries", 0, 1_000_000)
+        for name in ("stall_distance_m", "safety_distance_m"):
+            in_range(self, name, 0.0, MAX_AREA_M)
+        in_range(self, "margin_epsilon_j", 1e-12, 1e6)
+        in_range(
+            self,
+            "collision_sigma_m",
+            0.1,
+            MAX_AREA_M,
+            "the Gaussian divides by sigma^2, which must not underflow",
+        )
+        in_range(self, "deadline_speed_mps", 0.0, MAX_SPEED_MPS)
+        in_range(self, "fairness_lambda", 0.0, MAX_WEIGHT)
 
 
 @dataclass(frozen=True)
@@ -247,13 +289,25 @@ class PhysicsConfig:
 
     def __post_init__(self) -> None:
         check_finite(self)
-        require(0 < self.timestep_s <= 0.5, "timestep_s", self.timestep_s, "a number in (0, 0.5]")
-        require(
-            self.current_jitter_mps >= 0,
-            "current_jitter_mps",
-            self.current_jitter_mps,
-            "a number >= 0",
+        in_range(
+            self,
+            "timestep_s",
+            1e-3,
+            0.25,
+            "a longer Euler step overshoots the hull's 500 N/(m/s) speed servo",
         )
+        require(
+            all(abs(c) <= MAX_SPEED_MPS for c in self.current_mps),
+            "current_mps",
+            self.current_mps,
+            f"components in [-{MAX_SPEED_MPS:g}, {MAX_SPEED_MPS:g}] m/s",
+        )
+        in_range(self, "current_jitter_mps", 0.0, MAX_SPEED_MPS)
+
+    @property
+    def max_current_mps(self) -> float:
+        """The fastest current of any episode: the jitter is drawn per axis."""
+        return math.hypot(*self.current_mps) + math.sqrt(2.0) * self.current_jitter_mps
 
 
 @dataclass(frozen=True)
@@ -277,7 +331,12 @@ class ScenarioConfig:
     def __post_init__(self) -> None:
         check_finite(self)
         ax, ay = self.area_m
-        require(ax > 0 and ay > 0, "area_m", self.area_m, "two sides > 0 m")
+        require(
+            10 <= ax <= MAX_AREA_M and 10 <= ay <= MAX_AREA_M,
+            "area_m",
+            self.area_m,
+            f"two sides from 10 to {MAX_AREA_M:g} m",
+        )
         require(
             1 <= self.n_auvs <= MAX_AUVS, "n_auvs", self.n_auvs, f"an integer from 1 to {MAX_AUVS}"
         )
@@ -312,15 +371,11 @@ class ScenarioConfig:
             self.dock_center_m,
             "a centre whose dock circle lies inside area_m",
         )
-        positive(self, "slot_s")
-        require(self.horizon_slots >= 1, "horizon_slots", self.horizon_slots, "an integer >= 1")
-        require(self.start_jitter_m >= 0, "start_jitter_m", self.start_jitter_m, "a number >= 0")
-        require(
-            self.start_heading_jitter_deg >= 0,
-            "start_heading_jitter_deg",
-            self.start_heading_jitter_deg,
-            "a number >= 0",
-        )
+        in_range(self, "start_heading_rad", -2 * math.pi, 2 * math.pi, "one turn either way")
+        in_range(self, "slot_s", 0.1, MAX_DURATION_S)
+        in_range(self, "horizon_slots", 1, MAX_HORIZON_SLOTS, "the log holds every slot")
+        in_range(self, "start_jitter_m", 0.0, MAX_AREA_M)
+        in_range(self, "start_heading_jitter_deg", 0.0, 180.0)
 
     @property
     def n_nodes(self) -> int:
@@ -337,6 +392,54 @@ class Config:
     network: NetworkConfig = field(default_factory=NetworkConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+
+    def __post_init__(self) -> None:
+        """Bounds that join sections."""
+        slot_s, m, ph = self.scenario.slot_s, self.motion, self.physics
+        for name in ("charging_s", "data_s"):
+            value = getattr(self.acoustics, name)
+            require(
+                value <= slot_s,
+                f"acoustics.{name}",
+                value,
+                f"at most one slot (scenario.slot_s={slot_s:g} s)",
+            )
+        require(
+            ph.max_current_mps <= m.v_max_mps,
+            "physics.current_mps",
+            ph.current_mps,
+            f"a current the vehicle can out-run: |current_mps| + sqrt(2) current_jitter_mps = "
+            f"{ph.max_current_mps:.3g} m/s at most motion.v_max_mps={m.v_max_mps:g} (then the "
+            "speed over ground stays within 2 V_max, the top of its observation)",
+        )
+        substeps = round(slot_s / ph.timestep_s)
+        require(
+            abs(substeps * ph.timestep_s - slot_s) <= 1e-9 * slot_s
+            and substeps <= MAX_SUBSTEPS_PER_SLOT,
+            "physics.timestep_s",
+            ph.timestep_s,
+            f"a divisor of scenario.slot_s={slot_s:g} s into at most {MAX_SUBSTEPS_PER_SLOT} "
+            "substeps (MuJoCo records every substep of a slot)",
+        )
+        flow_mps = m.v_max_mps + ph.max_current_mps
+        require(
+            flow_mps * ph.timestep_s <= MAX_FLOW_STEP_M,
+            "physics.timestep_s",
+            ph.timestep_s,
+            f"at most {MAX_FLOW_STEP_M / flow_mps:.3g} s: the water passes the hull at up to "
+            f"v_max + current = {flow_mps:.3g} m/s, and more than {MAX_FLOW_STEP_M} m per step "
+            "diverges",
+        )
+        drag_kg = m.drag_factor_nspm2 * flow_mps * ph.timestep_s
+        require(
+            drag_kg <= MAX_DRAG_STEP_KG,
+            "physics.timestep_s",
+            ph.timestep_s,
+            f"at most {MAX_DRAG_STEP_KG / (m.drag_factor_nspm2 * flow_mps):.3g} s with drag "
+            f"rho*C_d*S/2 = {m.drag_factor_nspm2:.3g} N s^2/m^2 and flow up to {flow_mps:.3g} "
+            f"m/s (drag x flow x timestep must be at most {MAX_DRAG_STEP_KG:g} kg, or the "
+            "explicit step overshoots)",
+        )
 
     def replace(self, **sections: Any) -> Config:
         """A copy with some sections replaced, e.g. `cfg.replace(scenario=...)`."""

@@ -9,7 +9,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import re
+import stat
 import types
 import typing
 from pathlib import Path
@@ -21,6 +23,10 @@ MAX_FILE_BYTES = 1 << 20
 """Config files are small; a larger one is refused unread."""
 MAX_ALIASES = 64
 """YAML aliases a config file may use (an alias bomb expands a few hundred bytes into GBs)."""
+MAX_DEPTH = 32
+"""Nesting of lists and mappings a config file may use (the deepest config is 4 levels)."""
+MAX_ENTRIES = 100_000
+"""Values a config file may hold, counting each use of a YAML alias in full."""
 MAX_SHOWN = 120
 """Characters of a value an error message shows."""
 
@@ -48,10 +54,8 @@ def check_finite(obj: Any) -> None:
 
 
 def _numbers(value: Any) -> list[float]:
-    if isinstance(value, bool):
-        return []
-    if isinstance(value, (int, float)):
-        return [float(value)]
+    if isinstance(value, float):
+        return [value]
     if isinstance(value, (tuple, list)):
         return [x for v in value for x in _numbers(v)]
     return []
@@ -67,6 +71,23 @@ def positive(obj: Any, *names: str) -> None:
     for name in names:
         value = getattr(obj, name)
         require(math.isfinite(value) and value > 0, name, value, "a finite number > 0")
+
+
+def _number(value: float) -> str:
+    return f"{value:g}"
+
+
+def in_range(
+    obj: Any, name: str, low: float, high: float, why: str = "", low_open: bool = False
+) -> None:
+    """`obj.name` lies in [low, high] ((low, high] with `low_open`); `why` says where the
+    bounds come from when that is not obvious."""
+    value = getattr(obj, name)
+    ok = (low < value if low_open else low <= value) and value <= high
+    kind = "an integer" if isinstance(value, int) else "a number"
+    bracket = "(" if low_open else "["
+    reason = f" ({why})" if why else ""
+    require(ok, name, value, f"{kind} in {bracket}{_number(low)}, {_number(high)}]{reason}")
 
 
 def fraction(obj: Any, *names: str) -> None:
@@ -106,9 +127,13 @@ def _convert(tp: Any, value: Any, name: str) -> Any:
             )
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{name}={shown(value)} has the wrong type: accepted a number")
-        if not math.isfinite(value):
-            raise ConfigError(f"{name}={value} is invalid: accepted a finite number")
-        return float(value)
+        try:
+            number = float(value)
+        except OverflowError:
+            number = math.inf
+        if not math.isfinite(number):
+            raise ConfigError(f"{name}={shown(value)} is invalid: accepted a finite number")
+        return number
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{name}={shown(value)} has the wrong type: accepted an integer")
@@ -129,11 +154,14 @@ def build_dataclass(cls: Any, data: Any, name: str) -> Any:
         raise ConfigError(f"{name}={shown(data)} has the wrong type: accepted a mapping")
     hints = typing.get_type_hints(cls)
     known = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - known)
+    unknown = sorted(shown(k) for k in set(data) - known)
     if unknown:
         raise ConfigError(f"{name}: unknown key(s) {unknown}; accepted keys {sorted(known)}")
     kwargs = {k: _convert(hints[k], v, f"{name}.{k}") for k, v in data.items()}
-    return cls(**kwargs)
+    try:
+        return cls(**kwargs)
+    except ConfigError as exc:  # a check of the dataclass: say where the field is
+        raise ConfigError(f"{name}.{exc}") from None
 
 
 def _is_number_text(text: str) -> bool:
@@ -145,15 +173,41 @@ def _is_number_text(text: str) -> bool:
 
 
 class _Loader(yaml.SafeLoader):
-    """PyYAML's safe loader, with YAML 1.2 floats (`2e6` is a number, as in JSON) and a cap on
-    aliases."""
+    """PyYAML's safe loader, with YAML 1.2 floats (`2e6` is a number, as in JSON), a cap on
+    aliases and on nesting (checked while composing, before the composer's recursion can go
+    deep), and duplicate keys refused."""
+
+    aliases_seen = 0
+    depth = 0
 
     def compose_node(self, parent: Any, index: Any) -> Any:
         if self.check_event(yaml.AliasEvent):
-            self.aliases_seen = getattr(self, "aliases_seen", 0) + 1
+            self.aliases_seen += 1
             if self.aliases_seen > MAX_ALIASES:
                 raise ConfigError(f"more than {MAX_ALIASES} YAML aliases: refused")
-        return super().compose_node(parent, index)
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            raise ConfigError(f"lists and mappings nested deeper than {MAX_DEPTH}: refused")
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # `<<: *defaults` may be overridden by the mapping's own keys
+                key = self.construct_object(key_node, deep=True)
+                if isinstance(key, typing.Hashable):
+                    if key in seen:
+                        raise ConfigError(
+                            f"key {shown(key)} appears twice in one mapping "
+                            f"(line {key_node.start_mark.line + 1}): accepted each key once"
+                        )
+                    seen.add(key)
+        return super().construct_mapping(node, deep=deep)
 
 
 _Loader.add_implicit_resolver(
@@ -163,21 +217,142 @@ _Loader.add_implicit_resolver(
 )
 
 
-def load_mapping(path: str | Path, what: str) -> dict[str, Any]:
-    """The mapping in a YAML or JSON file; an empty, unreadable, oversized or non-mapping file
-    is an error that names it."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{what} {path} does not exist")
-    if path.stat().st_size > MAX_FILE_BYTES:
-        raise ConfigError(f"{what} {path} is larger than {MAX_FILE_BYTES} bytes")
+def _json_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object whose keys are all distinct."""
+    data: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in data:
+            raise ConfigError(f"key {shown(key)} appears twice in one object: accepted each once")
+        data[key] = value
+    return data
+
+
+_JSON_TOKEN = re.compile(r'[\[\]{}"\\]')
+
+
+def _json_depth(text: str) -> int:
+    """The deepest nesting of brackets outside strings, in one linear scan without parsing
+    (json's parser recurses once per level)."""
+    depth = deepest = 0
+    in_string, escaped_at = False, -1
+    for match in _JSON_TOKEN.finditer(text):
+        i, c = match.start(), match.group()
+        if i == escaped_at:
+            continue
+        if in_string:
+            if c == "\\":
+                escaped_at = i + 1
+            in_string = c != '"'
+        elif c == '"':
+            in_string = True
+        elif c in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif c in "]}":
+            depth -= 1
+    return deepest
+
+
+def _children(value: Any) -> list[Any]:
+    items = value.items() if isinstance(value, dict) else enumerate(value)
+    return [v for _, v in items if isinstance(v, (dict, list))]
+
+
+def _check_size(data: Any) -> None:
+    """Nesting at most MAX_DEPTH and at most MAX_ENTRIES values, counting every use of a
+    shared (aliased) list or mapping; iterative and linear in the distinct containers."""
+    height: dict[int, int] = {}
+    entries: dict[int, int] = {}
+    open_ids: set[int] = set()
+    stack: list[tuple[Any, bool]] = [(data, False)] if isinstance(data, (dict, list)) else []
+    while stack:
+        value, closing = stack.pop()
+        key = id(value)
+        if closing:
+            children = _children(value)
+            height[key] = 1 + max((height[id(c)] for c in children), default=0)
+            entries[key] = len(value) + sum(entries[id(c)] for c in children)
+            open_ids.discard(key)
+            if height[key] > MAX_DEPTH:
+                raise ConfigError(f"lists and mappings nested deeper than {MAX_DEPTH}: refused")
+            if entries[key] > MAX_ENTRIES:
+                raise ConfigError(f"more than {MAX_ENTRIES} values (aliases expanded): refused")
+        elif key not in height:
+            if key in open_ids:
+                raise ConfigError("a list or mapping that contains itself: refused")
+            open_ids.add(key)
+            stack.append((value, True))
+            stack.extend((c, False) for c in _children(value))
+
+
+_FILE_KINDS = {
+    stat.S_ISDIR: "a directory",
+    stat.S_ISFIFO: "a FIFO",
+    stat.S_ISCHR: "a character device",
+    stat.S_ISBLK: "a block device",
+    stat.S_ISSOCK: "a socket",
+}
+
+
+def read_bytes(path: Path, what: str, max_bytes: int = MAX_FILE_BYTES) -> bytes:
+    """The bytes of a regular file of at most `max_bytes`; anything else (a directory, FIFO,
+    device, a /proc file that yields more, an unreadable file) is a ConfigError naming it.
+
+    The file is opened non-blocking (a FIFO with no writer would block) and checked on the
+    open descriptor, and at most `max_bytes` + 1 bytes are read (a /proc file reports size 0).
+    """
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0)
     try:
-        text = path.read_text(encoding="utf-8")
+        fd = os.open(path, flags)
+    except FileNotFoundError:
+        raise ConfigError(f"{what} {path} does not exist") from None
+    except OSError as exc:
+        raise ConfigError(f"{what} {path} cannot be opened: {exc.strerror or exc}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            kind = next((k for test, k in _FILE_KINDS.items() if test(mode)), "a special file")
+            raise ConfigError(f"{what} {path} is {kind}: accepted a regular file")
+        chunks: list[bytes] = []
+        size = 0
+        while size <= max_bytes:
+            chunk = os.read(fd, max_bytes + 1 - size)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+    except OSError as exc:
+        raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if size > max_bytes:
+        raise ConfigError(f"{what} {path} is larger than {max_bytes} bytes")
+    return b"".join(chunks)
+
+
+def _parse(text: str, suffix: str) -> Any:
+    if suffix == ".json":
+        if _json_depth(text) > MAX_DEPTH:
+            raise ConfigError(f"lists and mappings nested deeper than {MAX_DEPTH}: refused")
+        return json.loads(text, object_pairs_hook=_json_pairs)
+    return yaml.load(text, Loader=_Loader)
+
+
+def load_mapping(path: str | Path, what: str) -> dict[str, Any]:
+    """The mapping in a YAML or JSON file; an empty, unreadable, oversized, non-regular,
+    over-deep or non-mapping file, or one with a duplicated key, is an error that names it."""
+    path = Path(path)
+    raw = read_bytes(path, what)
+    try:
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{what} {path} is not UTF-8 text: {exc}") from exc
     try:
-        data = json.loads(text) if path.suffix == ".json" else yaml.load(text, Loader=_Loader)
-    except (json.JSONDecodeError, yaml.YAMLError) as exc:
+        data = _parse(text, path.suffix)
+        _check_size(data)
+    except ConfigError as exc:
+        raise ConfigError(f"{what} {path}: {exc}") from None
+    except (yaml.YAMLError, ValueError, RecursionError) as exc:  # ValueError: json, int digits
         raise ConfigError(f"{what} {path} is not valid YAML/JSON: {shown(str(exc))}") from exc
     if data is None:
         raise ConfigError(f"{what} {path} is empty: accepted a mapping of settings")
