@@ -14,14 +14,24 @@ from iout_mj.schema import (
     ConfigError,
     build_dataclass,
     check_finite,
-    finite_at_least,
+    in_range,
     load_mapping,
-    positive,
     require,
 )
 
 BACKENDS = ("mujoco", "kinematic", "warp")
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+MAX_TIMESTEPS = 10**10
+"""Environment steps of a phase (and between evaluations)."""
+MAX_ROLLOUT_STEPS = 1 << 18
+"""Transitions of one PPO rollout (envs x n_steps): the buffer holds an observation of up to
+~500 float32 each, so it stays under ~0.5 GB."""
+MAX_IMITATION_SLOTS = 250_000
+"""Slots the DAgger data set records ((episodes + rounds x round_episodes) x horizon_slots):
+a token observation of up to ~4 kB each, so it stays under ~1 GB."""
+MAX_ENVS = 1024
+MAX_LAYERS, MAX_WIDTH = 8, 2048
+"""net_arch: at most 8 layers of 2048 (33M parameters, 0.4 GB with Adam's moments)."""
 
 
 @dataclass(frozen=True)
@@ -33,7 +43,7 @@ class PhaseConfig:
 
     def __post_init__(self) -> None:
         require(self.backend in BACKENDS, "backend", self.backend, f"one of {BACKENDS}")
-        require(self.timesteps >= 1, "timesteps", self.timesteps, "an integer >= 1")
+        in_range(self, "timesteps", 1, MAX_TIMESTEPS)
 
 
 POLICIES = ("mlp", "tokens")
@@ -61,11 +71,17 @@ class ImitationConfig:
 
         check_finite(self)
         require(self.planner in PLANNERS, "planner", self.planner, f"one of {sorted(PLANNERS)}")
-        for name in ("episodes", "epochs", "round_episodes", "round_epochs"):
-            require(getattr(self, name) >= 1, name, getattr(self, name), "an integer >= 1")
-        require(self.rounds >= 0, "rounds", self.rounds, "an integer >= 0")
-        require(0 <= self.beta <= 1, "beta", self.beta, "a number in [0, 1]")
-        positive(self, "learning_rate")
+        for name in ("episodes", "round_episodes"):
+            in_range(self, name, 1, 10_000)
+        for name in ("epochs", "round_epochs"):
+            in_range(self, name, 1, 1000)
+        in_range(self, "rounds", 0, 100)
+        in_range(self, "beta", 0.0, 1.0)
+        in_range(self, "learning_rate", 0.0, 1.0, low_open=True)
+
+    @property
+    def total_episodes(self) -> int:
+        return self.episodes + self.rounds * self.round_episodes
 
 
 @dataclass(frozen=True)
@@ -126,20 +142,26 @@ class TrainConfig:
                 self.n_nodes,
                 f"{sorted(PAPER_LAYOUTS)} with layout 'paper'",
             )
-        for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "eval_every_steps"):
-            require(getattr(self, name) >= 1, name, getattr(self, name), "an integer >= 1")
-        require(self.eval_episodes >= 1, "eval_episodes", self.eval_episodes, "an integer >= 1")
-        require(self.torch_threads >= 1, "torch_threads", self.torch_threads, "an integer >= 1")
-        require(self.seed >= 0, "seed", self.seed, "an integer >= 0")
-        positive(self, "learning_rate", "clip_range")
-        finite_at_least(self, 0.0, "learning_rate_final", "ent_coef")
+        in_range(self, "n_envs", 1, MAX_ENVS)
+        in_range(self, "n_steps", 1, MAX_ROLLOUT_STEPS)
+        in_range(self, "batch_size", 1, MAX_ROLLOUT_STEPS)
+        in_range(self, "n_epochs", 1, 1000)
+        in_range(self, "eval_every_steps", 1, MAX_TIMESTEPS)
+        in_range(self, "eval_episodes", 1, 10_000)
+        in_range(self, "torch_threads", 1, 256)
+        in_range(self, "seed", 0, 2**32 - 1, "numpy's seed range")
+        in_range(self, "learning_rate", 0.0, 1.0, low_open=True)
+        in_range(self, "learning_rate_final", 0.0, 1.0)
+        in_range(self, "ent_coef", 0.0, 1.0)
+        in_range(self, "clip_range", 0.0, 1.0, low_open=True)
         require(0 < self.gamma <= 1, "gamma", self.gamma, "a number in (0, 1]")
         require(0 <= self.gae_lambda <= 1, "gae_lambda", self.gae_lambda, "a number in [0, 1]")
         require(
-            bool(self.net_arch) and all(w >= 1 for w in self.net_arch),
+            1 <= len(self.net_arch) <= MAX_LAYERS
+            and all(1 <= w <= MAX_WIDTH for w in self.net_arch),
             "net_arch",
             self.net_arch,
-            "a non-empty list of layer widths >= 1",
+            f"1 to {MAX_LAYERS} layer widths from 1 to {MAX_WIDTH}",
         )
         require(self.policy in POLICIES, "policy", self.policy, f"one of {POLICIES}")
         lo, hi = self.node_range
@@ -155,14 +177,36 @@ class TrainConfig:
             list(self.noise_models),
             f"a non-empty list of {NOISE_MODELS}",
         )
-        require(self.width >= 4, "width", self.width, "an integer >= 4")
+        in_range(self, "width", 4, 1024)
+        require(
+            self.envs <= MAX_ENVS,
+            "n_envs",
+            self.n_envs,
+            f"at most {MAX_ENVS} environments in all (here {self.envs}: n_envs per scenario cell)",
+        )
+        require(
+            self.envs * self.n_steps <= MAX_ROLLOUT_STEPS,
+            "n_steps",
+            self.n_steps,
+            f"envs x n_steps = {self.envs * self.n_steps} transitions per rollout at most "
+            f"{MAX_ROLLOUT_STEPS} (the rollout buffer holds them all)",
+        )
+        if self.imitation is not None:
+            slots = self.imitation.total_episodes * self.env.scenario.horizon_slots
+            require(
+                slots <= MAX_IMITATION_SLOTS,
+                "imitation.episodes",
+                self.imitation.episodes,
+                f"(episodes + rounds x round_episodes) x env.scenario.horizon_slots = {slots} "
+                f"recorded slots at most {MAX_IMITATION_SLOTS} (the data set holds them all)",
+            )
         if (self.envs * self.n_steps) % self.batch_size:
             raise ConfigError(
                 f"batch_size={self.batch_size} must divide n_envs*n_steps="
                 f"{self.envs * self.n_steps}"
             )
-        if not self.phases:
-            raise ConfigError("phases: accepted a non-empty list of {backend, timesteps}")
+        if not 1 <= len(self.phases) <= 16:
+            raise ConfigError("phases: accepted a list of 1 to 16 {backend, timesteps}")
 
     @property
     def envs(self) -> int:
