@@ -19,6 +19,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 from iout_mj.agents.policies import SHIPPED_DIR, PolicyError, load_policy, read_trained
 from iout_mj.agents.policy_format import (
     MANIFEST,
+    MANIFEST_SHA256,
     NORMALIZATION,
     WEIGHTS,
     load_policy_folder,
@@ -121,10 +122,22 @@ def copy_of_shipped(tmp_path):
     return folder
 
 
+def _reseal(folder):
+    """policy.json's sidecar recomputed, as a deliberate editor would (sha256sum > ...)."""
+    digest = sha256(folder / MANIFEST)
+    (folder / MANIFEST_SHA256).write_text(f"{digest}  {MANIFEST}\n")
+
+
 def _rehash(folder):
     manifest = json.loads((folder / MANIFEST).read_text())
     manifest["files"] = {name: sha256(folder / name) for name in manifest["files"]}
     (folder / MANIFEST).write_text(json.dumps(manifest))
+    _reseal(folder)
+
+
+def _rewrite(folder, text):
+    (folder / MANIFEST).write_text(text)
+    _reseal(folder)
 
 
 @pytest.mark.parametrize(
@@ -136,11 +149,18 @@ def _rehash(folder):
             lambda f: ((f / WEIGHTS).write_bytes((f / WEIGHTS).read_bytes()[:5000]), _rehash(f)),
             "not a valid safetensors",
         ),
-        (lambda f: (f / MANIFEST).write_text("{"), "not valid JSON"),
-        (lambda f: (f / MANIFEST).write_text('{"format": "other"}'), "not an iout-mj-policy"),
         (
-            lambda f: (f / MANIFEST).write_text(
-                (f / MANIFEST).read_text().replace('"schema_version": 1', '"schema_version": 9')
+            lambda f: (f / MANIFEST).write_text((f / MANIFEST).read_text().replace("256", "257")),
+            "does not match its SHA-256 in policy.json.sha256",
+        ),
+        (lambda f: (f / MANIFEST_SHA256).unlink(), "policy.json.sha256 is missing"),
+        (lambda f: (f / MANIFEST_SHA256).write_text("0" * 64), "not a checksum line"),
+        (lambda f: _rewrite(f, "{"), "not valid JSON"),
+        (lambda f: _rewrite(f, "[" * 100_000), "nested too deeply"),
+        (lambda f: _rewrite(f, '{"format": "other"}'), "not an iout-mj-policy"),
+        (
+            lambda f: _rewrite(
+                f, (f / MANIFEST).read_text().replace('"schema_version": 1', '"schema_version": 9')
             ),
             "schema_version 9",
         ),
@@ -176,6 +196,8 @@ def test_policy_manifest_records_the_env_config():
     manifest = json.loads((SHIPPED_DIR / "ppo-n2-k7" / MANIFEST).read_text())
     assert manifest["env_config"]["scenario"]["n_auvs"] == 2
     assert set(manifest["files"]) == {WEIGHTS, NORMALIZATION}
+    sidecar = (SHIPPED_DIR / "ppo-n2-k7" / MANIFEST_SHA256).read_text()
+    assert sidecar == f"{sha256(SHIPPED_DIR / 'ppo-n2-k7' / MANIFEST)}  {MANIFEST}\n"
     raw = io.BytesIO((SHIPPED_DIR / "ppo-n2-k7" / WEIGHTS).read_bytes())
     assert raw.read(8)  # safetensors: an 8-byte header length, a JSON header, raw tensors
 
@@ -186,11 +208,11 @@ def test_policy_manifest_records_the_env_config():
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
 @given(
-    name=st.sampled_from([MANIFEST, WEIGHTS, NORMALIZATION]),
+    name=st.sampled_from([MANIFEST, MANIFEST_SHA256, WEIGHTS, NORMALIZATION]),
     position=st.floats(0, 1, exclude_max=True),
     byte=st.integers(0, 255),
 )
-def test_any_changed_byte_is_refused_or_harmless(tmp_path_factory, name, position, byte):
+def test_any_changed_byte_is_refused(tmp_path_factory, name, position, byte):
     folder = tmp_path_factory.mktemp("p") / "policy"
     shutil.copytree(SHIPPED_DIR / "ppo-n1-k7", folder)
     data = bytearray((folder / name).read_bytes())
@@ -202,9 +224,9 @@ def test_any_changed_byte_is_refused_or_harmless(tmp_path_factory, name, positio
     try:
         loaded = read_trained(str(folder), env)
     except PolicyError as exc:
-        assert str(folder) in str(exc)
+        assert changed and str(folder) in str(exc)
         return
-    # accepted: the byte was unchanged, or it sat in the manifest's free text (whitespace,
-    # a description) and left format, spaces and checksums intact
-    assert not changed or name == MANIFEST
+    # every file is covered by a checksum, the manifest by its sidecar: only an unchanged byte
+    # is accepted
+    assert not changed
     assert loaded.manifest["observation_size"] == env.observation_space.shape[0]
