@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # The compiled mission rules (iout_mj/_native*.so): rebuilt when a C source changes.
 NATIVE := $(VENV)/.native
-NATIVE_SOURCES := iout_mj/native.h $(wildcard iout_mj/*/*.c)
+NATIVE_SOURCES := iout_mj/native.h iout_mj/native.c $(wildcard iout_mj/*/*.c)
 # The CPU build of torch that lies on these machines' disk; an unpinned torch pulls CUDA (GBs).
 TORCH := torch==2.13.0
 

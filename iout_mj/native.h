@@ -1,88 +1,126 @@
-/* The compiled rules' shared declarations: the structs Python fills (iout_mj/native.py) and
- * the functions of world/network.c, mission/rules.c and backends/kinematic.c.
+/* The compiled rules' one declaration of everything C and Python share: the structs, the
+ * reward terms and the observation groups, each as an X-macro list that expands here to the
+ * C struct and, in layout.c, to a table of names, types, offsets and sizes that the library
+ * exports (iout_decls, iout_groups). Python (iout_mj/native.py) builds its views from that
+ * table, by name and offset, and refuses at import a library whose fields differ from its own
+ * arrays in name or element type: field order is free, drift is loud.
  *
- * Every array is C-contiguous with a leading batch axis of B environments (one env: B = 1);
- * the field order of each struct is the order of its Python declaration, and iout_layout()
- * states it so that native.py refuses a library whose layout differs. */
+ * Every array is C-contiguous with a leading batch axis of B environments (one env: B = 1).
+ * Every exported function (IOUT_API) checks what it is handed and returns IOUT_OK or an error
+ * code, with the details in iout_error(); Python turns them into exceptions. */
 #ifndef IOUT_NATIVE_H
 #define IOUT_NATIVE_H
 
 #include <stdbool.h>
 #include <stdint.h>
 
-/* mission.rules.PARAMS_DTYPE: the constants of a config. */
-typedef struct {
-    double slot_s;
-    int64_t horizon_slots;
-    double area_x_m, area_y_m, inv_diag_per_m;
-    double dock_x_m, dock_y_m, dock_radius_m;
-    double v_max_mps, hotel_j, drag_power_w_at_1mps;
-    int64_t k_reset;
-    double aoi_max, deadline_speed_mps, fairness_lambda;
-    int64_t fairness_min_deliveries;
-    double stall_distance_m, margin_epsilon_j, collision_sigma_m, safety_distance_m;
-    double collision_distance_m, energy_obs_ref_j, obs_high;
-    /* config.RewardWeights, signed, in field order */
-    double w_docking_progress, w_aoi, w_fairness, w_boundary, w_stall, w_energy_margin,
-        w_infeasible_uplink, w_collision, w_dock_first_entry, w_dock_all, w_deadline,
-        w_undocked_at_end;
-} Params;
+#define IOUT_API __attribute__((visibility("default")))
+/* Bounds of the sizes C accepts (stack arrays are sized by them); configs allow far less. */
+#define IOUT_MAX_AUVS 64
+#define IOUT_MAX_NODES 4096
 
-/* world.acoustics.LINK_DTYPE: the link budget's distance-independent constants. */
-typedef struct {
-    double harvest_j, uplink_j, wet_per_m, data_per_m, spreading, min_distance_m;
-} Link;
+/* ----------------------------------------------------------------- declarations */
+/* Params: the constants of a config (mission.rules.params). X(type, name). */
+#define IOUT_PARAMS(X)                                                                          \
+    X(double, slot_s) X(int64_t, horizon_slots) X(double, area_x_m) X(double, area_y_m)         \
+    X(double, inv_diag_per_m) X(double, dock_x_m) X(double, dock_y_m) X(double, dock_radius_m)  \
+    X(double, v_max_mps) X(double, hotel_j) X(double, drag_power_w_at_1mps)                     \
+    X(int64_t, k_reset) X(double, aoi_max) X(double, deadline_speed_mps)                        \
+    X(double, fairness_lambda) X(int64_t, fairness_min_deliveries) X(double, stall_distance_m)  \
+    X(double, margin_epsilon_j) X(double, collision_sigma_m) X(double, safety_distance_m)       \
+    X(double, collision_distance_m) X(double, energy_obs_ref_j) X(double, obs_high)             \
+    IOUT_REWARD_WEIGHTS(X)
 
-/* world.network.NetworkArrays: node state, (B, K) unless noted. */
-typedef struct {
-    double *nodes_m; /* (B, K, 2) */
-    double *energy_j, *aoi;
-    int64_t *service_count, *deliveries;
-    double *mean_aoi, *jain; /* (B,) */
-} Network;
+/* The signed reward weights, config.RewardWeights's fields with a w_ prefix. */
+#define IOUT_REWARD_WEIGHTS(X)                                                                  \
+    X(double, w_docking_progress) X(double, w_aoi) X(double, w_fairness) X(double, w_boundary)  \
+    X(double, w_stall) X(double, w_energy_margin) X(double, w_infeasible_uplink)                \
+    X(double, w_collision) X(double, w_dock_first_entry) X(double, w_dock_all)                  \
+    X(double, w_deadline) X(double, w_undocked_at_end)
 
-/* mission.state.MissionState, (B, ...) with the axes declared there. */
-typedef struct {
-    double *positions_m, *headings_rad, *speeds_mps, *heading_sp, *speed_sp, *straight_end_m;
-    bool *boundary_attempt;
-    int64_t *action;
-    bool *docked;
-    double *dock_dist_m, *deadline_slack_m, *distance_m, *battery_j, *propulsion_energy_j,
-        *yaw_energy_j, *current_mps;
-    int64_t *slot;
-    double *sum_mean_aoi, *sum_objective, *aoi_after_mission, *min_separation_m;
-    int64_t *collisions;
-    bool *all_docked_paid;
-    double *reward;
-    bool *terminated, *truncated;
-} State;
+/* Link: the link budget's distance-independent constants (world.acoustics.LinkBudget). */
+#define IOUT_LINK(X)                                                                            \
+    X(double, harvest_j) X(double, uplink_j) X(double, wet_per_m) X(double, data_per_m)         \
+    X(double, spreading) X(double, min_distance_m)
 
-/* mission.state.MissionLog: (B, T + 1, ...) states, (B, T, N) links. */
-typedef struct {
-    double *positions_m, *headings_rad, *speeds_mps, *mean_aoi, *jain;
-    int64_t *aet_nodes, *uplink_nodes;
-    bool *uplink_ok;
-} Log;
+/* Network: pointers to the node state, (B, K) unless noted (world.network.SensorNetwork).
+ * X(element type, name). */
+#define IOUT_NETWORK(X)                                                                         \
+    X(double, nodes_m) /* (B, K, 2) */                                                          \
+    X(double, energy_j) X(double, aoi) X(int64_t, service_count) X(int64_t, deliveries)         \
+    X(double, mean_aoi) X(double, jain) /* (B,) */
 
-/* mission.core.Mission's view for the rules: sizes, constants, state, and the slot's inputs
- * and outputs. */
+/* State: pointers to mission.state.MissionState's arrays, with the axes declared there. */
+#define IOUT_STATE(X)                                                                           \
+    X(double, positions_m) X(double, headings_rad) X(double, speeds_mps) X(double, heading_sp)  \
+    X(double, speed_sp) X(double, straight_end_m) X(bool, boundary_attempt) X(int64_t, action)  \
+    X(bool, docked) X(double, dock_dist_m) X(double, deadline_slack_m) X(double, distance_m)    \
+    X(double, battery_j) X(double, propulsion_energy_j) X(double, yaw_energy_j)                 \
+    X(double, current_mps) X(int64_t, slot) X(double, sum_mean_aoi) X(double, sum_objective)    \
+    X(double, aoi_after_mission) X(double, min_separation_m) X(int64_t, collisions)             \
+    X(bool, all_docked_paid) X(double, reward) X(bool, terminated) X(bool, truncated)
+
+/* Log: pointers to mission.state.MissionLog's arrays: (B, T + 1, ...) states, (B, T, N) links. */
+#define IOUT_LOG(X)                                                                             \
+    X(double, positions_m) X(double, headings_rad) X(double, speeds_mps) X(double, mean_aoi)    \
+    X(double, jain) X(int64_t, aet_nodes) X(int64_t, uplink_nodes) X(bool, uplink_ok)
+
+/* Mission, the one argument of the slot functions (mission.core.Mission's private view):
+ * sizes (the bounds every check uses), constants, the state, and the slot's inputs and
+ * outputs. */
+#define IOUT_MISSION_SIZES(X)                                                                   \
+    X(int64_t, n_envs) X(int64_t, n_auvs) X(int64_t, n_nodes) X(int64_t, horizon_slots)         \
+    X(int64_t, heading_levels) X(int64_t, speed_levels) X(int64_t, n_obs) X(int64_t, n_path)
+#define IOUT_MISSION_CONSTANTS(X)                                                               \
+    X(const Params, p) X(const Link, link)                                                      \
+    X(const double, dtheta_rad) /* (heading_levels,) */                                         \
+    X(const double, dv_mps)     /* (speed_levels,) */
+#define IOUT_MISSION_STRUCTS(X) X(State, s) X(Network, net) X(Log, log)
+#define IOUT_MISSION_IO(X)                                                                      \
+    X(int64_t, actions)           /* (B, N, 4) the slot's decoded actions */                    \
+    X(double, end_positions_m)    /* (B, N, 2) */                                               \
+    X(double, end_headings_rad)   /* (B, N) */                                                  \
+    X(double, end_speeds_mps)     /* (B, N) */                                                  \
+    X(double, propulsion_energy_j) /* (B, N) of the slot */                                     \
+    X(double, yaw_energy_j)       /* (B, N) of the slot */                                      \
+    X(double, path_m)             /* (S, B, N, 2), S = n_path */                                \
+    X(double, terms)              /* (B, reward terms) */                                       \
+    X(double, obs)                /* (B, n_obs) */
+
+/* The reward terms, in the order of the mission's term array (mission.rewards). */
+#define IOUT_REWARD_TERMS(X)                                                                    \
+    X(docking_progress) X(aoi) X(fairness) X(boundary) X(stall) X(energy_margin)                \
+    X(infeasible_uplink) X(collision) X(docking) X(deadline) X(undocked_at_end)                 \
+    X(aoi_after_mission)
+
+/* The observation groups, in order, with their sizes for N AUVs and K nodes:
+ * X(name, per AUV, per node, per AUV-node pair, fixed) (mission.observation documents them). */
+#define IOUT_OBSERVATION(X)                                                                     \
+    X(auv_position, 2, 0, 0, 0) X(auv_heading, 2, 0, 0, 0) X(auv_speed, 1, 0, 0, 0)             \
+    X(docked, 1, 0, 0, 0) X(aoi, 0, 1, 0, 0) X(node_energy, 0, 1, 0, 0)                         \
+    X(distance, 0, 0, 1, 0) X(dock_distance, 1, 0, 0, 0) X(time_remaining, 0, 0, 0, 1)
+
+/* ----------------------------------------------------------------- the structs */
+#define IOUT_VALUE_FIELD(type, name) type name;
+#define IOUT_POINTER_FIELD(type, name) type *name;
+
+typedef struct { IOUT_PARAMS(IOUT_VALUE_FIELD) } Params;
+typedef struct { IOUT_LINK(IOUT_VALUE_FIELD) } Link;
+typedef struct { IOUT_NETWORK(IOUT_POINTER_FIELD) } Network;
+typedef struct { IOUT_STATE(IOUT_POINTER_FIELD) } State;
+typedef struct { IOUT_LOG(IOUT_POINTER_FIELD) } Log;
 typedef struct {
-    int64_t n_envs, n_auvs, n_nodes, n_path;
-    const Params *p;
-    const Link *link;
-    const double *dtheta_rad, *dv_mps; /* per heading / speed index */
-    State s;
-    Network net;
-    Log log;
-    int64_t *actions; /* (B, N, 4) the slot's decoded actions */
-    double *end_positions_m, *end_headings_rad, *end_speeds_mps; /* (B, N, 2), (B, N) */
-    double *propulsion_energy_j, *yaw_energy_j;                  /* (B, N) of the slot */
-    double *path_m;                                              /* (S, B, N, 2), S = n_path */
-    double *terms;                                               /* (B, 12) reward terms */
-    double *obs;                                                 /* (B, D) observation */
+    IOUT_MISSION_SIZES(IOUT_VALUE_FIELD)
+    IOUT_MISSION_CONSTANTS(IOUT_POINTER_FIELD)
+    IOUT_MISSION_STRUCTS(IOUT_VALUE_FIELD)
+    IOUT_MISSION_IO(IOUT_POINTER_FIELD)
 } Mission;
 
-/* What a slot did, as the reward terms read it (mission/rewards.c); per AUV arrays are (N,). */
+#define IOUT_COUNT(...) +1
+enum { N_REWARD_TERMS = 0 IOUT_REWARD_TERMS(IOUT_COUNT) };
+
+/* What a slot did, as the reward terms read it (mission/rewards.c; internal to C). Per AUV
+ * arrays are (N,). */
 typedef struct {
     int64_t n_auvs;
     const bool *active;           /* not docked at the start of the slot */
@@ -100,46 +138,76 @@ typedef struct {
     double aoi_after_mission; /* mean-AoI sum of the unserved slots left until T_max */
 } SlotContext;
 
-#define N_REWARD_TERMS 12
+/* ----------------------------------------------------------------- the exported table */
+typedef struct {
+    const char *owner; /* struct name */
+    const char *name;  /* field name; "" for the struct's own size */
+    const char *type;  /* C element type ("double", "int64_t", "bool", a struct name) */
+    const char *kind;  /* "value", "pointer", "struct" or "sizeof" */
+    int64_t offset, size;
+} IoutDecl;
 
-const char *iout_layout(void);
+typedef struct {
+    const char *name;
+    int64_t per_auv, per_node, per_pair, fixed;
+} IoutGroup;
+
+/* ----------------------------------------------------------------- errors */
+enum { IOUT_OK = 0, IOUT_EINVAL = 1, IOUT_EACTION = 2 };
+/* Record an error (printf format) for iout_error(); returns IOUT_EINVAL. */
+int64_t iout_fail(const char *format, ...) __attribute__((format(printf, 1, 2)));
+/* Checks of a Mission shared by every entry point (rules.c). */
+int64_t iout_check_mission(const Mission *m, bool actions, bool state_actions);
+
+/* ----------------------------------------------------------------- exported functions */
+IOUT_API int64_t iout_decls(const IoutDecl **table);
+IOUT_API int64_t iout_groups(const IoutGroup **table);
+IOUT_API int64_t iout_terms(const char *const **names);
+IOUT_API const char *iout_error(void);
 
 /* world/network.c */
-void iout_link_energies(const Link *link, double distance_m, double *harvest_j, double *uplink_j);
-void iout_link_energies_each(const Link *link, const double *distance_m, int64_t count,
-                             double *harvest_j, double *uplink_j);
+IOUT_API int64_t iout_link_energies(const Link *link, const double *distance_m, int64_t count,
+                                    double *harvest_j, double *uplink_j);
+IOUT_API int64_t iout_summarise(const Network *net, int64_t n_envs, int64_t k);
+IOUT_API int64_t iout_serve(const Network *net, int64_t e, int64_t n_envs, int64_t n,
+                            int64_t k, const Link *link, int64_t k_reset, double aoi_max,
+                            const double *auv_xy, const int64_t *wet, const int64_t *data,
+                            int64_t node_stride, const bool *active, double *distance_m,
+                            bool *uplink_ok, double *uplink_req_j, double *uplink_stored_j,
+                            double *harvested_j, bool *delivered);
+void iout_link_energy(const Link *link, double distance_m, double *harvest_j, double *uplink_j);
 double iout_jain(const int64_t *counts, int64_t k);
 void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int64_t k,
                     double *distance_m);
-void iout_summarise(const Network *net, int64_t n_envs, int64_t k);
-void iout_serve(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
-                int64_t k_reset, double aoi_max, const double *auv_xy, const int64_t *wet,
-                const int64_t *data, int64_t node_stride, const bool *active,
-                double *distance_m, bool *uplink_ok, double *uplink_req_j,
-                double *uplink_stored_j, double *harvested_j, bool *delivered);
+void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
+                    int64_t k_reset, double aoi_max, const double *auv_xy, const int64_t *wet,
+                    const int64_t *data, int64_t node_stride, const bool *active,
+                    double *distance_m, bool *uplink_ok, double *uplink_req_j,
+                    double *uplink_stored_j, double *harvested_j, bool *delivered);
 
 /* mission/rewards.c */
 double iout_slot_terms(const Params *p, const SlotContext *c, double *out);
 
 /* mission/rules.c */
-int64_t iout_first_bad_action(const int64_t *actions, int64_t count, const int64_t *high,
-                              int64_t width);
+IOUT_API int64_t iout_begin_slot(const Mission *m);
+IOUT_API int64_t iout_end_slot(const Mission *m);
+IOUT_API int64_t iout_start(const Mission *m, const bool *restarted);
+IOUT_API int64_t iout_observe(const Mission *m);
+IOUT_API int64_t iout_unserved_aoi_sum(const Params *p, int64_t slot, const double *aoi,
+                                       int64_t k, double *out);
+IOUT_API int64_t iout_node_energy_levels(const double *energy_j, int64_t count, double ref_j,
+                                         double high, double *out);
 void iout_begin_env(const Mission *m, int64_t e);
-void iout_begin_slot(const Mission *m);
 void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
                   const double *headings_rad, const double *speeds_mps,
                   const double *propulsion_energy_j, const double *yaw_energy_j,
                   const double *path_m, int64_t path_stride, int64_t n_path);
-void iout_end_slot(const Mission *m);
-void iout_start(const Mission *m, const bool *restarted);
-void iout_observe(const Mission *m);
-double iout_unserved_aoi_sum(const Params *p, int64_t slot, const double *aoi, int64_t k);
+double iout_unserved_aoi(const Params *p, int64_t slot, const double *aoi, int64_t k);
 double iout_node_energy_level(double energy_j, double ref_j, double high);
-void iout_node_energy_levels(const double *energy_j, int64_t count, double ref_j, double high,
-                             double *out);
 bool iout_in_area(const Params *p, double x, double y);
+double iout_wrap_angle(double angle_rad);
 
 /* backends/kinematic.c */
-void iout_kinematic_slot(const Mission *m);
+IOUT_API int64_t iout_kinematic_slot(const Mission *m);
 
 #endif

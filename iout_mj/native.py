@@ -1,23 +1,38 @@
-"""The compiled rules (`iout_mj/**/*.c`, built into `iout_mj._native` by the package's build):
-loading, the pointer structs the C code reads, and the layout check.
+"""The compiled rules (`iout_mj/native.c`, `iout_mj/*/*.c`, built into `iout_mj._native`):
+loading, the views Python builds from the library's own layout, and checked calls.
 
-The C library is loaded with ctypes (no Python API in C, nothing to JIT): each layer states
-its rules in Python docstrings and calls its C functions through the structs built here,
-whose field orders are the Python declarations'. `require_layout` refuses a library whose
-structs were declared in another order (a stale build), instead of reading wrong memory.
+`native.h` declares every struct, reward term and observation group once, as X-macro lists
+that expand to the C structs and to a table of names, types, offsets and sizes compiled into
+the library. This module reads that table and builds every view from it by name and offset
+(`record_dtype`, `struct_type`): a field moved in `native.h` moves here too, and a field that
+Python does not have, or has with another element type, fails at import (`require_fields`).
+Every exported C function checks what it is handed and returns a status; `call` turns a
+refusal into `NativeError` (or `ActionError` for an action index) with C's message. The C
+code holds addresses only, so every array it points to is allocated here (`allocate`) and
+owned by an object whose attributes cannot be rebound (`Frozen`).
 """
 
 from __future__ import annotations
 
 import ctypes
 import importlib.util
-from collections.abc import Iterable
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 LIBRARY = "iout_mj._native"
+SOURCES = ("native.h", "native.c", "*/*.c")
+"""The library's sources, relative to the package (globs)."""
+
+
+class NativeError(ValueError):
+    """The compiled rules refused what they were handed (the message says what and why)."""
+
+
+class ActionError(NativeError):
+    """An action outside the action space (the message names the AUV, field and range)."""
 
 
 def _load() -> ctypes.CDLL:
@@ -31,7 +46,7 @@ def _load() -> ctypes.CDLL:
     built = Path(spec.origin)
     package = Path(__file__).parent
     if (package.parent / "pyproject.toml").exists():  # a source checkout: is the build current?
-        sources = [package / "native.h", *package.glob("*/*.c")]
+        sources = [s for pattern in SOURCES for s in package.glob(pattern)]
         stale = [s.name for s in sources if s.stat().st_mtime > built.stat().st_mtime]
         if stale:
             raise ImportError(
@@ -47,49 +62,250 @@ lib = _load()
 P = ctypes.c_void_p
 I64 = ctypes.c_int64
 F64 = ctypes.c_double
-_SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
-    "iout_layout": (ctypes.c_char_p, []),
-    "iout_link_energies_each": (None, [P, P, I64, P, P]),
-    "iout_jain": (F64, [P, I64]),
-    "iout_summarise": (None, [P, I64, I64]),
-    "iout_serve": (None, [P, I64, I64, I64, P, I64, F64, P, P, P, I64, P, P, P, P, P, P, P]),
-    "iout_first_bad_action": (I64, [P, I64, P, I64]),
-    "iout_begin_slot": (None, [P]),
-    "iout_end_slot": (None, [P]),
-    "iout_start": (None, [P, P]),
-    "iout_observe": (None, [P]),
-    "iout_unserved_aoi_sum": (F64, [P, I64, P, I64]),
-    "iout_node_energy_levels": (None, [P, I64, F64, F64, P]),
-    "iout_kinematic_slot": (None, [P]),
+_SIGNATURES: dict[str, list[Any]] = {
+    "iout_decls": [P],
+    "iout_groups": [P],
+    "iout_terms": [P],
+    "iout_link_energies": [P, P, I64, P, P],
+    "iout_summarise": [P, I64, I64],
+    "iout_serve": [P, I64, I64, I64, I64, P, I64, F64, P, P, P, I64, P, P, P, P, P, P, P],
+    "iout_begin_slot": [P],
+    "iout_end_slot": [P],
+    "iout_start": [P, P],
+    "iout_observe": [P],
+    "iout_unserved_aoi_sum": [P, I64, P, I64, P],
+    "iout_node_energy_levels": [P, I64, F64, F64, P],
+    "iout_kinematic_slot": [P],
 }
-for _name, (_result, _args) in _SIGNATURES.items():
-    getattr(lib, _name).restype = _result
+"""Every exported function returns an int64 status (0: done)."""
+for _name, _args in _SIGNATURES.items():
+    getattr(lib, _name).restype = I64
     getattr(lib, _name).argtypes = _args
+lib.iout_error.restype = ctypes.c_char_p
+lib.iout_error.argtypes = []
+_EACTION = 2
+"""native.h's IOUT_EACTION."""
+
+
+def call(function: Any, *args: Any) -> None:
+    """Call a checked C function (`lib.iout_*`); a refusal raises with C's message."""
+    status = function(*args)
+    if status:
+        text = lib.iout_error().decode()
+        raise (ActionError if status == _EACTION else NativeError)(text)
+
+
+# ---------------------------------------------------------------------------- declarations
+class Decl(NamedTuple):
+    """One field of a struct as the compiled library declares it."""
+
+    owner: str
+    name: str
+    type: str
+    """C element type: 'double', 'int64_t', 'bool', or a struct name ('const ' dropped)."""
+    kind: str
+    """'value', 'pointer' or 'struct'."""
+    offset: int
+    size: int
+
+
+class _CDecl(ctypes.Structure):
+    _fields_ = [
+        ("owner", ctypes.c_char_p),
+        ("name", ctypes.c_char_p),
+        ("type", ctypes.c_char_p),
+        ("kind", ctypes.c_char_p),
+        ("offset", ctypes.c_int64),
+        ("size", ctypes.c_int64),
+    ]
+
+
+class _CGroup(ctypes.Structure):
+    _fields_ = [
+        ("name", ctypes.c_char_p),
+        ("per_auv", ctypes.c_int64),
+        ("per_node", ctypes.c_int64),
+        ("per_pair", ctypes.c_int64),
+        ("fixed", ctypes.c_int64),
+    ]
+
+
+class Group(NamedTuple):
+    """An observation group as the compiled library declares it: its size is
+    per_auv N + per_node K + per_pair N K + fixed."""
+
+    name: str
+    per_auv: int
+    per_node: int
+    per_pair: int
+    fixed: int
+
+
+def _table(function: Any, row: type[ctypes.Structure]) -> list[Any]:
+    pointer = ctypes.POINTER(row)()
+    count = function(ctypes.byref(pointer))
+    return [pointer[i] for i in range(count)]
+
+
+def read_layout(library: ctypes.CDLL) -> tuple[dict[str, list[Decl]], dict[str, int]]:
+    """The fields of every struct (in offset order) and every struct's size, as `library` was
+    compiled."""
+    library.iout_decls.restype = I64
+    fields: dict[str, list[Decl]] = {}
+    sizes: dict[str, int] = {}
+    for d in _table(library.iout_decls, _CDecl):
+        owner, kind = d.owner.decode(), d.kind.decode()
+        if kind == "sizeof":
+            sizes[owner] = d.size
+            continue
+        ctype = d.type.decode().removeprefix("const ")
+        fields.setdefault(owner, []).append(
+            Decl(owner, d.name.decode(), ctype, kind, d.offset, d.size)
+        )
+    return {k: sorted(v, key=lambda f: f.offset) for k, v in fields.items()}, sizes
+
+
+FIELDS, SIZES = read_layout(lib)
+"""The compiled library's structs: their fields and sizes."""
+GROUPS = tuple(
+    Group(g.name.decode(), g.per_auv, g.per_node, g.per_pair, g.fixed)
+    for g in _table(lib.iout_groups, _CGroup)
+)
+"""The observation groups, in order (native.h's IOUT_OBSERVATION)."""
+_terms = ctypes.POINTER(ctypes.c_char_p)()
+REWARD_TERMS = tuple(_terms[i].decode() for i in range(lib.iout_terms(ctypes.byref(_terms))))
+"""The reward terms, in the order of the mission's term array (IOUT_REWARD_TERMS)."""
+
+ELEMENT_DTYPES = {
+    "double": np.dtype(np.float64),
+    "int64_t": np.dtype(np.int64),
+    "bool": np.dtype(bool),
+    "_Bool": np.dtype(bool),  # what `bool` expands to before the table stringifies it
+}
+_CTYPES = {"double": ctypes.c_double, "int64_t": ctypes.c_int64}
+
+
+def record_dtype(owner: str) -> np.dtype:
+    """The numpy record of a struct of values (Params, Link), at the library's offsets."""
+    fields = FIELDS[owner]
+    return np.dtype(
+        {
+            "names": [f.name for f in fields],
+            "formats": [ELEMENT_DTYPES[f.type] for f in fields],
+            "offsets": [f.offset for f in fields],
+            "itemsize": SIZES[owner],
+        }
+    )
+
+
+_STRUCTS: dict[str, type[ctypes.Structure]] = {}
+
+
+def struct_type(owner: str) -> type[ctypes.Structure]:
+    """The ctypes struct of `owner` (pointers as addresses, nested structs built likewise),
+    checked field by field against the library's offsets and size."""
+    if owner in _STRUCTS:
+        return _STRUCTS[owner]
+    members: list[tuple[str, Any]] = []
+    for f in FIELDS[owner]:
+        if f.kind == "pointer":
+            members.append((f.name, P))
+        elif f.kind == "struct":
+            members.append((f.name, struct_type(f.type)))
+        else:
+            members.append((f.name, _CTYPES[f.type]))
+    struct: type[ctypes.Structure] = type(owner, (ctypes.Structure,), {"_fields_": members})
+    moved = [f.name for f in FIELDS[owner] if getattr(struct, f.name).offset != f.offset]
+    if moved or ctypes.sizeof(struct) != SIZES[owner]:
+        raise ImportError(
+            f"{LIBRARY}: ctypes lays out {owner} unlike the compiler (fields {moved}, size "
+            f"{ctypes.sizeof(struct)} vs {SIZES[owner]}); rebuild the library with this "
+            "Python's C compiler"
+        )
+    _STRUCTS[owner] = struct
+    return struct
+
+
+def require_fields(owner: str, expected: Mapping[str, np.dtype | None]) -> None:
+    """Refuse, at import, a library whose `owner` struct does not have exactly the fields
+    Python declares, with the same element types (None: any)."""
+    built = {f.name: ELEMENT_DTYPES.get(f.type) for f in FIELDS.get(owner, [])}
+    missing = sorted(set(expected) - set(built))
+    extra = sorted(set(built) - set(expected))
+    typed = sorted(
+        f"{name} ({expected[name]} here, {built[name]} in C)"
+        for name in set(expected) & set(built)
+        if expected[name] is not None and np.dtype(expected[name]) != built[name]
+    )
+    if missing or extra or typed:
+        raise ImportError(
+            f"{LIBRARY} declares {owner} unlike this Python source (missing in C: {missing}; "
+            f"unknown to Python: {extra}; other element types: {typed}); rebuild the library "
+            "(`pip install -e .`) or update both sides together"
+        )
+
+
+def require_names(what: str, built: tuple[str, ...], expected: tuple[str, ...]) -> None:
+    """Refuse, at import, a library whose list `what` differs from Python's."""
+    if built != expected:
+        raise ImportError(
+            f"{LIBRARY} declares {what} {list(built)}; this Python source expects "
+            f"{list(expected)}; rebuild the library (`pip install -e .`) or update both sides"
+        )
+
+
+# ---------------------------------------------------------------------------- memory
+def allocate(shape: tuple[int, ...], dtype: Any, fill: Any = 0) -> np.ndarray:
+    """A new C-contiguous array that C code will point to (every such array comes from here)."""
+    return np.full(shape, fill, dtype=dtype)
 
 
 def address(a: np.ndarray) -> int:
     """The data pointer of a C-contiguous array (checked: the C code assumes it)."""
     if not a.flags.c_contiguous:
-        raise ValueError("the compiled rules need C-contiguous arrays")
+        raise NativeError("the compiled rules need C-contiguous arrays")
     return int(a.ctypes.data)
 
 
-def pointers(name: str, fields: Iterable[str]) -> type[ctypes.Structure]:
-    """A ctypes struct of one pointer per field, in order (the C struct of that name)."""
-    return type(name, (ctypes.Structure,), {"_fields_": [(f, P) for f in fields]})
-
-
 def fill(struct: ctypes.Structure, arrays: Any) -> None:
-    """Point every field of `struct` at the array of the same name in `arrays` (a namedtuple)."""
-    for field in struct._fields_:
-        setattr(struct, field[0], address(getattr(arrays, field[0])))
+    """Point every pointer field of `struct` at the array of the same name in `arrays` (a
+    mapping, or an object with those attributes), after checking its element type. The
+    caller keeps the arrays alive as long as the struct (C holds addresses only)."""
+    owner = type(struct).__name__
+    for f in FIELDS[owner]:
+        if f.kind != "pointer":
+            continue
+        array = arrays[f.name] if isinstance(arrays, Mapping) else getattr(arrays, f.name)
+        if f.type in ELEMENT_DTYPES and array.dtype != ELEMENT_DTYPES[f.type]:
+            raise NativeError(f"{owner}.{f.name} is {array.dtype}; C reads {f.type}")
+        setattr(struct, f.name, address(array))
 
 
-def require_layout(layout: str) -> None:
-    """Refuse a library whose structs are declared in another order than `layout`."""
-    built = lib.iout_layout().decode()
-    if built != layout:
-        raise ImportError(
-            f"{LIBRARY} was built from other struct declarations than this source; rebuild it "
-            f"(`pip install -e .`). Built: {built!r}; expected: {layout!r}"
-        )
+def read_only(a: np.ndarray) -> np.ndarray:
+    """`a`, made read-only (constants C reads: they cannot be changed from Python)."""
+    a.flags.writeable = False
+    return a
+
+
+class Frozen:
+    """Attributes that cannot be rebound once `_freeze()` ran: C holds the addresses of the
+    arrays they reach, so rebinding one would leave C on old or freed memory. Write into an
+    array instead (`obj.name[...] = value`). Names starting with an underscore stay free."""
+
+    _frozen = False
+
+    def _freeze(self) -> None:
+        object.__setattr__(self, "_frozen", True)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if self._frozen and not name.startswith("_"):
+            raise AttributeError(
+                f"{type(self).__name__}.{name} cannot be rebound: the compiled rules point into "
+                f"what it holds; write into its arrays in place (e.g. .{name}[...] = value)"
+            )
+        object.__setattr__(self, name, value)
+
+    def __delattr__(self, name: str) -> None:
+        if self._frozen and not name.startswith("_"):
+            raise AttributeError(f"{type(self).__name__}.{name} cannot be deleted")
+        object.__delattr__(self, name)

@@ -8,7 +8,6 @@ import sys
 import numpy as np
 import pytest
 
-from iout_mj import native
 from iout_mj.config import Config
 from iout_mj.mission import REWARD_TERMS, Mission
 from iout_mj.scenarios import make_config
@@ -165,11 +164,6 @@ def test_world_and_mission_do_not_import_mujoco():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
-
-
-def test_compiled_rules_refuse_a_library_built_from_other_declarations():
-    with pytest.raises(ImportError, match="other struct declarations"):
-        native.require_layout("state:positions_m")
 
 
 def test_a_pickled_mission_steps_like_the_original_on_its_own_memory():

@@ -1,11 +1,16 @@
-"""Sensor-node rules: AoI growth, cap, K_reset, energy causality, Jain."""
+"""Sensor-node rules: AoI growth, cap, K_reset, energy causality, Jain (the compiled
+`iout_serve` on a `SensorNetwork`, one slot at a time)."""
+
+import ctypes
+from typing import NamedTuple
 
 import numpy as np
 import pytest
 
+from iout_mj import native
 from iout_mj.config import AcousticsConfig, NetworkConfig
 from iout_mj.world import acoustics
-from iout_mj.world.network import SensorNetwork, jain_index
+from iout_mj.world.network import SensorNetwork
 
 NODES = [(100.0, 100.0), (900.0, 900.0)]
 NEAR = np.array([[100.0, 150.0]])  # 50 m from node 0, far from node 1
@@ -19,8 +24,49 @@ def make(k_reset=3, aoi_max=50.0, e0=0.1):
     )
 
 
+class Outcome(NamedTuple):
+    distance_m: np.ndarray
+    uplink_ok: np.ndarray
+    uplink_req_j: np.ndarray
+    uplink_stored_j: np.ndarray
+    harvested_j: np.ndarray
+    delivered: np.ndarray
+
+
+def serve(net, xy, wet, data, active, env=0):
+    """One slot of env `env` of `net` by the compiled rules; what it did."""
+    xy = np.ascontiguousarray(xy, dtype=float)
+    n, k = len(xy), net.n_nodes
+    out = Outcome(
+        np.zeros((n, k)),
+        np.zeros(n, bool),
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros(k),
+        np.zeros(k, bool),
+    )
+    args = [np.ascontiguousarray(a, dtype=t) for a, t in ((wet, np.int64), (data, np.int64))]
+    native.call(
+        native.lib.iout_serve,
+        ctypes.addressof(net._struct),
+        env,
+        len(net._arrays.aoi),
+        n,
+        k,
+        native.address(net.link.constants),
+        net.cfg.k_reset,
+        net.cfg.aoi_max,
+        native.address(xy),
+        *(native.address(a) for a in args),
+        1,
+        native.address(np.ascontiguousarray(active, dtype=bool)),
+        *(native.address(x) for x in out),
+    )
+    return out
+
+
 def step(net, data_node, wet_node=0, xy=NEAR, active=True):
-    return net.step(xy, [wet_node], [data_node], [active])
+    return serve(net, xy, [wet_node], [data_node], [active])
 
 
 def test_aoi_grows_by_one_and_caps():
@@ -73,7 +119,7 @@ def test_two_auvs_on_one_node_count_one_delivery_at_the_nearest_cost():
     net = make()
     xy = np.array([[100.0, 150.0], [100.0, 400.0]])
     e0 = net.energy_j[0]
-    out = net.step(xy, [1, 1], [0, 0], [True, True])
+    out = serve(net, xy, [1, 1], [0, 0], [True, True])
     assert out.uplink_ok.tolist() == [True, True]
     assert net.deliveries[0] == 1
     spent = e0 + out.harvested_j[0] - net.energy_j[0]
@@ -83,7 +129,7 @@ def test_two_auvs_on_one_node_count_one_delivery_at_the_nearest_cost():
 def test_harvest_from_two_auvs_adds_up():
     net = make(e0=0.0)
     xy = np.array([[100.0, 150.0], [100.0, 150.0]])
-    out = net.step(xy, [0, 0], [1, 1], [True, True])
+    out = serve(net, xy, [0, 0], [1, 1], [True, True])
     single = acoustics.harvest_energy_j(50.0, AcousticsConfig())
     assert out.harvested_j[0] == pytest.approx(2 * single)
 
@@ -104,12 +150,10 @@ def test_delivered_bits():
     ],
 )
 def test_jain(counts, expected):
-    assert jain_index(counts) == pytest.approx(expected)
-
-
-def test_jain_over_a_batch_of_rows():
-    rows = np.array([[1, 1, 1], [3, 0, 0], [0, 0, 0]])
-    np.testing.assert_allclose(jain_index(rows), [1.0, 1 / 3, 0.0])
+    net = SensorNetwork([(0.0, 0.0)] * len(counts), NetworkConfig(), AcousticsConfig())
+    net.deliveries[...] = counts
+    net.summarise()
+    assert net.jain == pytest.approx(expected)
 
 
 def test_batched_network_steps_each_row_like_a_single_network():
@@ -123,11 +167,29 @@ def test_batched_network_steps_each_row_like_a_single_network():
     xy = np.array([[[100.0, 150.0]], [[880.0, 900.0]]])  # row 0 near node 0, row 1 near node 1
     for t in range(5):
         data, wet = np.array([[0], [t % 2]]), np.array([[1], [1]])
-        out = batch.step(xy, wet, data, np.ones((2, 1), dtype=bool))
         for r, net in enumerate(single):
-            o = net.step(xy[r], wet[r], data[r], [True])
-            np.testing.assert_allclose(out.uplink_req_j[r], o.uplink_req_j)
-            np.testing.assert_array_equal(out.uplink_ok[r], o.uplink_ok)
+            out = serve(batch, xy[r], wet[r], data[r], [True], env=r)
+            o = serve(net, xy[r], wet[r], data[r], [True])
+            np.testing.assert_allclose(out.uplink_req_j, o.uplink_req_j)
+            np.testing.assert_array_equal(out.uplink_ok, o.uplink_ok)
             np.testing.assert_allclose(batch.energy_j[r], net.energy_j)
             np.testing.assert_array_equal(batch.aoi[r], net.aoi)
+            np.testing.assert_array_equal(batch.jain[r], net.jain)
     assert batch.deliveries.sum() > 0
+
+
+@pytest.mark.parametrize(
+    ("env", "wet", "data", "message"),
+    [
+        (2, 0, 0, r"env 2 of 2"),
+        (-1, 0, 0, r"env -1 of 2"),
+        (0, 2, 0, r"names nodes 2 and 0; accepted 0 to 1"),
+        (0, 0, -1, r"names nodes 0 and -1; accepted 0 to 1"),
+    ],
+)
+def test_serve_refuses_an_env_or_node_out_of_range(env, wet, data, message):
+    net = SensorNetwork(NODES, NetworkConfig(), AcousticsConfig(), batch=(2,))
+    before = net.energy_j.copy()
+    with pytest.raises(native.NativeError, match=message):
+        serve(net, NEAR, [wet], [data], [True], env=env)
+    np.testing.assert_array_equal(net.energy_j, before)  # refused before anything changed

@@ -35,5 +35,6 @@ def test_wheel_carries_the_assets_and_a_working_compiled_library(tmp_path):
         (library,) = [n for n in names if n.startswith("iout_mj/_native") and n.endswith(".so")]
         z.extract(library, tmp_path)
     built = ctypes.CDLL(str(tmp_path / library))
-    built.iout_layout.restype = ctypes.c_char_p
-    assert built.iout_layout() == native.lib.iout_layout()  # the same declarations
+    fields, sizes = native.read_layout(built)  # the wheel's own compiled declarations
+    assert (fields, sizes) == (native.FIELDS, native.SIZES)
+    assert fields["State"] and sizes["Mission"] > 0

@@ -14,7 +14,7 @@ import numpy as np
 from iout_mj.mission import Mission
 from iout_mj.types import BoolArray, FloatArray, IntArray
 from iout_mj.world import acoustics
-from iout_mj.world.geometry import pairwise_distance_m
+from iout_mj.world.geometry import pairwise_distance_m, wrap_angle
 
 NODE_REACHED_M = 60.0
 """A node is 'being visited' within this distance."""
@@ -30,10 +30,6 @@ class Policy(Protocol):
     def __call__(self, mission: Mission) -> IntArray: ...
 
 
-def _wrap(angle: FloatArray) -> FloatArray:
-    return np.mod(angle + np.pi, 2 * np.pi) - np.pi
-
-
 def steer(
     mission: Mission, targets_m: FloatArray, speeds_mps: FloatArray, crab: bool = False
 ) -> tuple[IntArray, IntArray]:
@@ -46,7 +42,7 @@ def steer(
         across = np.cos(want) * c[1] - np.sin(want) * c[0]  # to the left of the track
         water = np.maximum(mission.state.speed_sp, 0.5)
         want = want - np.arcsin(np.clip(across / water, -0.9, 0.9))
-    dtheta = _wrap(want - mission.state.heading_sp)
+    dtheta = wrap_angle(want - mission.state.heading_sp)
     h = np.abs(mission.actions.dtheta_rad[None, :] - dtheta[:, None]).argmin(axis=1)
     dv = speeds_mps - mission.state.speed_sp
     s = np.abs(mission.actions.dv_mps[None, :] - dv[:, None]).argmin(axis=1)
@@ -68,7 +64,7 @@ def _must_dock(mission: Mission, extra_m: FloatArray | float = 0.0) -> BoolArray
     m = mission.cfg.motion
     slot_m = CRUISE_MPS * mission.cfg.scenario.slot_s
     delta = mission.dock_m - mission.state.positions_m
-    turn = np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - mission.state.heading_sp))
+    turn = np.abs(wrap_angle(np.arctan2(delta[:, 1], delta[:, 0]) - mission.state.heading_sp))
     turn_slots = turn / np.radians(m.dtheta_max_deg)
     ramp_slots = np.maximum(CRUISE_MPS - mission.state.speed_sp, 0) / m.dv_max_mps
     travel = (

@@ -21,14 +21,13 @@ from iout_mj.agents.baselines import (
     NODE_REACHED_M,
     _must_dock,
     _pack,
-    _wrap,
     approach_speed,
     steer,
 )
 from iout_mj.mission import Mission
 from iout_mj.types import BoolArray, FloatArray, IntArray
 from iout_mj.world import acoustics
-from iout_mj.world.geometry import pairwise_distance_m
+from iout_mj.world.geometry import pairwise_distance_m, wrap_angle
 
 CHARGED_J = 1.0
 """A node holding this much is charged: about ten uplinks from 500 m (0.1 J each); more
@@ -101,7 +100,7 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
 def _dock_turn_rad(mission: Mission) -> FloatArray:
     """How far each AUV's heading setpoint is from the bearing to the dock (0 to pi)."""
     delta = mission.dock_m - mission.state.positions_m
-    return np.abs(_wrap(np.arctan2(delta[:, 1], delta[:, 0]) - mission.state.heading_sp))
+    return np.abs(wrap_angle(np.arctan2(delta[:, 1], delta[:, 0]) - mission.state.heading_sp))
 
 
 def _tour_order(start_m: FloatArray, nodes_m: FloatArray) -> list[int]:

@@ -3,13 +3,16 @@
 
 #include "../native.h"
 
-#define PATH_POINTS 5 /* backends.kinematic.PATH_FRACTIONS: 0.2, 0.4, ..., 1 of each move */
+#define PATH_POINTS 5 /* separations are checked at 0.2, 0.4, ..., 1 of each move */
 
 /* Each AUV flies its setpoints through the water and drifts with the current (docked AUVs
  * stay); a move that would end outside the area is rejected (the AUV stays). Propulsion
  * energy is the cubic term for the distance flown through the water. */
-void iout_kinematic_slot(const Mission *m)
+int64_t iout_kinematic_slot(const Mission *m)
 {
+    int64_t status = iout_check_mission(m, true, false);
+    if (status)
+        return status;
     const Params *p = m->p;
     const State *s = &m->s;
     int64_t n = m->n_auvs;
@@ -31,7 +34,7 @@ void iout_kinematic_slot(const Mission *m)
             }
             end[2 * i] = x;
             end[2 * i + 1] = y;
-            heading[i] = M_PI - fmod(fmod(M_PI - s->heading_sp[a], 2 * M_PI) + 2 * M_PI, 2 * M_PI);
+            heading[i] = iout_wrap_angle(s->heading_sp[a]);
             speed[i] = s->speed_sp[a];
             energy_j[i] = speed[i] > 0.0 ? p->drag_power_w_at_1mps * pow(speed[i], 3) * water_m / speed[i] : 0.0;
             yaw_j[i] = 0.0;
@@ -43,4 +46,5 @@ void iout_kinematic_slot(const Mission *m)
         }
         iout_end_env(m, e, end, heading, speed, energy_j, yaw_j, path, 2 * n, PATH_POINTS);
     }
+    return IOUT_OK;
 }

@@ -30,7 +30,7 @@ def move(m: Mission, action: Any) -> Any:
     physics does); a move that would end outside the area is rejected (the AUV stays).
     Propulsion energy is the paper's, for the distance flown through the water."""
     m.set_actions(action)
-    native.lib.iout_kinematic_slot(m.view_address)
+    native.call(native.lib.iout_kinematic_slot, m._view_address)
     return m.state.reward[()]
 
 

@@ -21,28 +21,31 @@ from iout_mj.types import IntArray
 ACTION_FIELDS = ("heading", "speed", "aet_node", "uplink_node")
 
 
-class ActionError(ValueError):
-    """An action outside the action space."""
+ActionError = native.ActionError
+"""An action outside the action space."""
 
 
-class ActionMap:
-    """The action space of N AUVs and K nodes: 4 integer indices per AUV."""
+class ActionMap(native.Frozen):
+    """The action space of N AUVs and K nodes: 4 integer indices per AUV. The level tables
+    are read-only (the compiled rules index them); index ranges are checked in C, by
+    `iout_begin_slot`, before anything changes."""
 
     def __init__(self, cfg: Config, batch: tuple[int, ...] = ()):
         m, n, k = cfg.motion, cfg.scenario.n_auvs, cfg.scenario.n_nodes
         self.cfg, self.batch, self.n_auvs = cfg, batch, n
-        self.dtheta_rad = np.radians(m.dtheta_max_deg) * (
-            2 * np.arange(m.heading_levels) / (m.heading_levels - 1) - 1
-        )
+        self.dtheta_rad = _levels(np.radians(m.dtheta_max_deg), m.heading_levels)
         """Heading change of each heading index."""
-        self.dv_mps = m.dv_max_mps * (2 * np.arange(m.speed_levels) / (m.speed_levels - 1) - 1)
+        self.dv_mps = _levels(m.dv_max_mps, m.speed_levels)
         """Speed change of each speed index."""
-        self.high = np.tile(np.array([m.heading_levels, m.speed_levels, k, k], dtype=np.int64), n)
+        self.high = native.read_only(
+            np.tile(np.array([m.heading_levels, m.speed_levels, k, k], dtype=np.int64), n)
+        )
         """Exclusive upper bound of every entry of the flat action."""
+        self._freeze()
 
     def decode(self, action: Any) -> IntArray:
-        """Validate 4 integers per AUV (and a leading env axis when batched); returns
-        (*batch, N, 4) indices."""
+        """Check the shape and integrality of 4 indices per AUV (and a leading env axis when
+        batched); returns (*batch, N, 4) indices (their ranges are checked in C)."""
         a = np.asarray(action)
         shape = (*self.batch, self.high.size)
         if a.shape != shape:
@@ -59,19 +62,7 @@ class ActionMap:
             raise ActionError(
                 f"action {a.tolist()} has non-integer entries; accepted integer indices"
             )
-        a = np.ascontiguousarray(a, dtype=np.int64)
-        bad = native.lib.iout_first_bad_action(
-            native.address(a), a.size, native.address(self.high), self.high.size
-        )
-        if bad >= 0:
-            env, j = divmod(bad, self.high.size)
-            auv, f = divmod(j, 4)
-            where = f"env {env}, " if self.batch else ""
-            raise ActionError(
-                f"{where}AUV {auv}: {ACTION_FIELDS[f]} index {int(a.flat[bad])} "
-                f"is out of range; accepted 0 to {int(self.high[j]) - 1}"
-            )
-        return a.reshape(*self.batch, self.n_auvs, 4)
+        return np.asarray(a, dtype=np.int64).reshape(*self.batch, self.n_auvs, 4)
 
     def spec(self) -> specs.BoundedArray:
         """The dm_env action spec of one environment."""
@@ -82,3 +73,10 @@ class ActionMap:
             maximum=self.high - 1,
             name="action",
         )
+
+
+def _levels(max_change: float, levels: int) -> np.ndarray:
+    """The change of each of `levels` indices, from -max_change to +max_change (read-only)."""
+    values = native.allocate((levels,), float)
+    values[:] = max_change * (2 * np.arange(levels) / (levels - 1) - 1)
+    return native.read_only(values)

@@ -35,8 +35,13 @@ from iout_mj.types import BoolArray, FloatArray
 from iout_mj.world.network import SensorNetwork, rows
 
 
-class Mission:
-    """State and rules of one multi-AUV data-collection episode, or of B of them at once."""
+class Mission(native.Frozen):
+    """State and rules of one multi-AUV data-collection episode, or of B of them at once.
+
+    The compiled rules point into the state, log, network, constants and slot buffers of a
+    mission (its private `_view`), so none of its attributes can be rebound (`native.Frozen`):
+    state is written in place, and every C call checks sizes, slots and indices first.
+    """
 
     cfg: Config
     state: MissionState
@@ -62,38 +67,44 @@ class Mission:
         self.log = MissionLog.zeros(self.batch, self.n_auvs, sc.horizon_slots)
         """Per-slot history of the episode (`MissionLog`)."""
         self.params = rules.params(cfg)
-        """The config's constants for the rules, a (1,) record of `rules.PARAMS_DTYPE`."""
+        """The config's constants for the rules, a read-only (1,) record of
+        `rules.PARAMS_DTYPE`."""
         self.inv_diag = float(self.params["inv_diag_per_m"][0])
-        self.term_values = np.zeros((*(self.batch or (1,)), len(REWARD_TERMS)))
+        self.term_values = native.allocate((*(self.batch or (1,)), len(REWARD_TERMS)), float)
         """The last slot's reward terms, (B, terms) in the order of REWARD_TERMS."""
         self._bind()
+        self._freeze()
 
     def _bind(self) -> None:
-        """The rules' view of this mission: the arrays with a batch axis, the slot's inputs,
+        """The rules' view of this mission: the arrays with a batch axis, the slot's buffers,
         and the C struct of pointers (rebuilt after unpickling: it holds addresses)."""
         b, n = self.batch or (1,), self.n_auvs
-        self.arrays = self.state.arrays(bool(self.batch))
+        self._arrays = self.state.arrays(bool(self.batch))
         """The state with a batch axis always (one env: of one), as the rules see it."""
-        self.log_arrays = self.log.arrays(bool(self.batch))
-        self.inputs: dict[str, np.ndarray] = {
-            "actions": np.zeros((*b, n, 4), dtype=np.int64),
-            "end_positions_m": np.zeros((*b, n, 2)),
-            **{
-                k: np.zeros((*b, n))
-                for k in (
-                    "end_headings_rad",
-                    "end_speeds_mps",
-                    "propulsion_energy_j",
-                    "yaw_energy_j",
-                )
-            },
-            "path_m": np.zeros((0, *b, n, 2)),
-            "terms": self.term_values,
-            "obs": np.zeros((*b, sum(self.observation_sizes.values()))),
+        self._log_arrays = self.log.arrays(bool(self.batch))
+        shapes = {
+            "actions": (*b, n, 4),
+            "end_positions_m": (*b, n, 2),
+            "end_headings_rad": (*b, n),
+            "end_speeds_mps": (*b, n),
+            "propulsion_energy_j": (*b, n),
+            "yaw_energy_j": (*b, n),
+            "path_m": (0, *b, n, 2),
+            "obs": (*b, sum(self.observation_sizes.values())),
         }
-        """The slot's inputs and outputs that the rules share with Python (`rules.INPUTS`)."""
-        self.view = rules.MissionView(
-            n_envs=b[0], n_auvs=n, n_nodes=self.n_nodes, n_path=0, net=self.network.struct
+        self._inputs = {k: native.allocate(shapes[k], rules.INPUTS[k]) for k in shapes}
+        """The slot's buffers that the rules share with Python (`rules.INPUTS`)."""
+        self._inputs["terms"] = self.term_values
+        view = rules.MissionView(
+            n_envs=b[0],
+            n_auvs=n,
+            n_nodes=self.n_nodes,
+            horizon_slots=self.cfg.scenario.horizon_slots,
+            heading_levels=self.actions.dtheta_rad.size,
+            speed_levels=self.actions.dv_mps.size,
+            n_obs=shapes["obs"][-1],
+            n_path=0,
+            net=self.network._struct,
         )
         constants = {
             "p": self.params,
@@ -101,18 +112,16 @@ class Mission:
             "dtheta_rad": self.actions.dtheta_rad,
             "dv_mps": self.actions.dv_mps,
         }
-        for name, array in constants.items():
-            setattr(self.view, name, native.address(array))
-        for name in rules.INPUTS:  # every pointer the C reads (a missing one is a KeyError)
-            setattr(self.view, name, native.address(self.inputs[name]))
-        native.fill(self.view.s, self.arrays)
-        native.fill(self.view.log, self.log_arrays)
-        self.view_address = ctypes.addressof(self.view)
-        """The address of `view`, the one argument of the compiled slot functions."""
+        native.fill(view, {**constants, **self._inputs})
+        native.fill(view.s, self._arrays)
+        native.fill(view.log, self._log_arrays)
+        self._view = view
+        self._view_address = ctypes.addressof(view)
+        """The address of `_view`, the one argument of the compiled slot functions."""
         self._all_rows = np.ones(b, dtype=bool)
 
     def __getstate__(self) -> dict[str, Any]:
-        derived = ("arrays", "log_arrays", "inputs", "view", "view_address", "_all_rows")
+        derived = ("_arrays", "_log_arrays", "_inputs", "_view", "_view_address", "_all_rows")
         return {k: v for k, v in self.__dict__.items() if k not in derived}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -168,18 +177,23 @@ class Mission:
             s.reward[...] = 0.0
             self.term_values[...] = 0.0
         restarted = self._all_rows if mask is None else np.ascontiguousarray(mask, dtype=bool)
-        native.lib.iout_start(self.view_address, native.address(restarted))
+        if restarted.shape != self._all_rows.shape:
+            raise ValueError(
+                f"reset mask of shape {restarted.shape}; accepted {self._all_rows.shape}"
+            )
+        native.call(native.lib.iout_start, self._view_address, native.address(restarted))
 
     # ------------------------------------------------------------------ slot
     def begin_slot(self, action: Any) -> tuple[FloatArray, FloatArray]:
         """Apply an action: new heading (unwrapped) and speed setpoints for every AUV."""
         self.set_actions(action)
-        native.lib.iout_begin_slot(self.view_address)
+        native.call(native.lib.iout_begin_slot, self._view_address)
         return self.state.heading_sp, self.state.speed_sp
 
     def set_actions(self, action: Any) -> None:
-        """Validate an action (`ActionMap.decode`) and hand it to the rules."""
-        self.inputs["actions"].reshape(-1)[:] = self.actions.decode(action).reshape(-1)
+        """Check an action's shape (`ActionMap.decode`) and hand it to the rules (which check
+        its ranges before they use it)."""
+        self._inputs["actions"].reshape(-1)[:] = self.actions.decode(action).reshape(-1)
 
     def end_slot(
         self,
@@ -200,25 +214,25 @@ class Mission:
             path_m: (S, *batch, N, 2) positions during the slot (MuJoCo: every substep), for
                 the separation metrics.
         """
-        n, b, x = self.n_auvs, self.batch or (1,), self.inputs
+        n, b, x = self.n_auvs, self.batch or (1,), self._inputs
         path = np.asarray(path_m, dtype=float).reshape(len(path_m), *b, n, 2)
         if path.shape != x["path_m"].shape:  # the backend's points per slot
-            x["path_m"] = np.zeros(path.shape)
-            self.view.path_m, self.view.n_path = native.address(x["path_m"]), len(path)
+            x["path_m"] = native.allocate(path.shape, float)
+            self._view.path_m, self._view.n_path = native.address(x["path_m"]), len(path)
         x["path_m"][...] = path
         x["end_positions_m"][...] = np.reshape(positions_m, (*b, n, 2))
         x["end_headings_rad"][...] = np.reshape(headings_rad, (*b, n))
         x["end_speeds_mps"][...] = np.reshape(speeds_mps, (*b, n))
         x["propulsion_energy_j"][...] = np.reshape(propulsion_energy_j, (*b, n))
         x["yaw_energy_j"][...] = np.reshape(yaw_energy_j, (*b, n))
-        native.lib.iout_end_slot(self.view_address)
+        native.call(native.lib.iout_end_slot, self._view_address)
         return self.state.reward[()]
 
     # ------------------------------------------------------------------ views
     def observe(self) -> FloatArray:
         """The flat observation of every environment, (B, D) float64 (one env: B = 1)."""
-        native.lib.iout_observe(self.view_address)
-        obs: FloatArray = self.inputs["obs"]
+        native.call(native.lib.iout_observe, self._view_address)
+        obs: FloatArray = self._inputs["obs"]
         return obs
 
     def observation(self) -> dict[str, FloatArray]:

@@ -1,14 +1,17 @@
-"""The observation, declared once: name, size, scaling and range of every group, in order.
+"""The observation: every group's name, size, scaling and range, in order.
 
 The paper's state is positions, headings, speeds, AoI, node energies and distances; docked,
 dock distance and remaining time are added because the docking deadline makes them part of
-the Markov state. `OBSERVATION_DOC` (the env's docstring and the README) is made from here;
-the compiled `mission.rules.observe` writes the groups in this order.
+the Markov state.
+
+The groups, their order and sizes are declared once in `native.h` (IOUT_OBSERVATION, which
+also orders the C functions that write them); this module adds each group's documentation
+(checked at import to cover exactly those groups) and makes `OBSERVATION_DOC` (the env's
+docstring and the README) from both.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,8 +31,13 @@ def node_energy_level(energy_j: Any) -> FloatArray:
     (the compiled `iout_node_energy_level` of the observation; also the renderer's node size)."""
     e = np.ascontiguousarray(energy_j, dtype=float)
     out = np.empty_like(e)
-    native.lib.iout_node_energy_levels(
-        native.address(e), e.size, ENERGY_OBS_REF_J, OBS_HIGH, native.address(out)
+    native.call(
+        native.lib.iout_node_energy_levels,
+        native.address(e),
+        e.size,
+        ENERGY_OBS_REF_J,
+        OBS_HIGH,
+        native.address(out),
     )
     return out
 
@@ -37,79 +45,48 @@ def node_energy_level(energy_j: Any) -> FloatArray:
 @dataclass(frozen=True)
 class ObservationGroup:
     name: str
-    size_text: str
-    """Entries in terms of N and K, as the docs write it."""
-    size: Callable[[int, int], int]
-    """Entries for (N, K)."""
+    sizes: native.Group
+    """Entries per AUV, per node, per AUV-node pair and fixed (native.h)."""
     doc: str
     bounds: str
 
+    def size(self, n_auvs: int, n_nodes: int) -> int:
+        """Entries for N AUVs and K nodes."""
+        g = self.sizes
+        return g.per_auv * n_auvs + g.per_node * n_nodes + g.per_pair * n_auvs * n_nodes + g.fixed
 
-OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = (
-    ObservationGroup(
-        "auv_position",
-        "2N",
-        lambda n, k: 2 * n,
-        "(x, y) / area side",
-        "[0, 1]",
-    ),
-    ObservationGroup(
-        "auv_heading",
-        "2N",
-        lambda n, k: 2 * n,
-        "(cos, sin) of the measured heading",
-        "[-1, 1]",
-    ),
-    ObservationGroup(
-        "auv_speed",
-        "N",
-        lambda n, k: n,
-        "measured speed over ground / V_max",
-        "[0, ~1]",
-    ),
-    ObservationGroup(
-        "docked",
-        "N",
-        lambda n, k: n,
-        "1 once docked",
-        "{0, 1}",
-    ),
-    ObservationGroup(
-        "aoi",
-        "K",
-        lambda n, k: k,
-        "AoI / A_max",
-        "(0, 1]",
-    ),
-    ObservationGroup(
-        "node_energy",
-        "K",
-        lambda n, k: k,
-        "log10(1 + e / 1 mJ) / 5",
-        "[0, ~1]",
-    ),
-    ObservationGroup(
-        "distance",
-        "N*K",
-        lambda n, k: n * k,
-        "AUV-node distance / area diagonal",
-        "[0, 1]",
-    ),
-    ObservationGroup(
-        "dock_distance",
-        "N",
-        lambda n, k: n,
-        "distance to dock centre / diagonal",
-        "[0, 1]",
-    ),
-    ObservationGroup(
-        "time_remaining",
-        "1",
-        lambda n, k: 1,
-        "1 - slot / T_max",
-        "[0, 1]",
-    ),
+    @property
+    def size_text(self) -> str:
+        """Entries in terms of N and K, as the docs write it."""
+        g = self.sizes
+        parts = [
+            f"{c if c != 1 else ''}{unit}"
+            for c, unit in ((g.per_auv, "N"), (g.per_node, "K"), (g.per_pair, "N*K"))
+            if c
+        ]
+        return " + ".join(parts + ([str(g.fixed)] if g.fixed or not parts else []))
+
+
+_DOCS = {
+    "auv_position": ("(x, y) / area side", "[0, 1]"),
+    "auv_heading": ("(cos, sin) of the measured heading", "[-1, 1]"),
+    "auv_speed": ("measured speed over ground / V_max", "[0, ~1], clipped at 2"),
+    "docked": ("1 once docked", "{0, 1}"),
+    "aoi": ("AoI / A_max", "(0, 1]"),
+    "node_energy": ("log10(1 + e / 1 mJ) / 5", "[0, ~1], clipped at 2"),
+    "distance": ("AUV-node distance / area diagonal", "[0, 1]"),
+    "dock_distance": ("distance to dock centre / diagonal", "[0, 1]"),
+    "time_remaining": ("1 - slot / T_max", "[0, 1]"),
+}
+native.require_names(
+    "the observation groups (documented in mission/observation.py)",
+    tuple(g.name for g in native.GROUPS),
+    tuple(_DOCS),
 )
+OBSERVATION_LAYOUT: tuple[ObservationGroup, ...] = tuple(
+    ObservationGroup(g.name, g, *_DOCS[g.name]) for g in native.GROUPS
+)
+"""The observation groups in order: the library's declaration with their documentation."""
 
 
 def split_observation(flat: FloatArray, n_auvs: int, n_nodes: int) -> dict[str, FloatArray]:
@@ -137,6 +114,6 @@ OBSERVATION_DOC = (
     + "".join(
         f"  {g.name:<15}{g.size_text:>3}  {g.doc:<38} {g.bounds}\n" for g in OBSERVATION_LAYOUT
     )
-    + (__doc__ or "").split("\n\n")[1].split(" `OBSERVATION_DOC`")[0]
+    + (__doc__ or "").split("\n\n")[1]
     + "\n"
 )

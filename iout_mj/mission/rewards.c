@@ -1,5 +1,5 @@
-/* The reward terms, one small function each, in the order of mission.rewards.REWARD_TERMS;
- * each is scaled by its signed weight (config.RewardWeights). */
+/* The reward terms, one small function each, named and ordered by IOUT_REWARD_TERMS
+ * (native.h); each is scaled by its signed weight (config.RewardWeights). */
 #include <math.h>
 
 #include "../native.h"
@@ -110,14 +110,8 @@ static double aoi_after_mission(const Params *p, const SlotContext *c)
 
 typedef double (*Term)(const Params *, const SlotContext *);
 
-static const Term TERMS[N_REWARD_TERMS] = {
-    docking_progress, aoi,       fairness, boundary, stall,           energy_margin,
-    infeasible_uplink, collision, docking,  deadline, undocked_at_end, aoi_after_mission,
-};
-
-const char *const IOUT_REWARD_TERMS =
-    "docking_progress,aoi,fairness,boundary,stall,energy_margin,infeasible_uplink,collision,"
-    "docking,deadline,undocked_at_end,aoi_after_mission";
+#define TERM_FUNCTION(name) name,
+static const Term TERMS[N_REWARD_TERMS] = {IOUT_REWARD_TERMS(TERM_FUNCTION)};
 
 double iout_slot_terms(const Params *p, const SlotContext *c, double *out)
 {

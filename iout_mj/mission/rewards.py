@@ -1,7 +1,9 @@
 """The reward: one small function per term in `rewards.c`, each scaled by its signed weight.
 
-The compiled slot (`mission.rules`) evaluates every term of a slot in the order of
-`REWARD_TERMS` into the mission's term array; the reward is their sum in that order, and
+The terms are declared once, in `native.h` (IOUT_REWARD_TERMS), which orders both the C
+function table and `REWARD_TERMS`; the list below documents them, in that order (checked at
+import). The compiled slot (`mission.rules`) evaluates every term of a slot into the
+mission's term array; the reward is their sum in that order, and
 every term is logged (`info["reward_terms"]`, TensorBoard). Weights live in `RewardWeights`
 with their signs, thresholds in `RewardConfig`. The terms:
 
@@ -22,17 +24,14 @@ with their signs, thresholds in `RewardConfig`. The terms:
   slots left until T_max, with no more service, is booked when the episode ends.
 """
 
-REWARD_TERMS = (
-    "docking_progress",
-    "aoi",
-    "fairness",
-    "boundary",
-    "stall",
-    "energy_margin",
-    "infeasible_uplink",
-    "collision",
-    "docking",
-    "deadline",
-    "undocked_at_end",
-    "aoi_after_mission",
+import re
+
+from iout_mj import native
+
+REWARD_TERMS: tuple[str, ...] = native.REWARD_TERMS
+"""The terms in the order of the term array, as `native.h` declares them (IOUT_REWARD_TERMS)."""
+native.require_names(
+    "the reward terms (documented in mission/rewards.py)",
+    REWARD_TERMS,
+    tuple(re.findall(r"^- (\w+):", __doc__ or "", flags=re.M)),
 )

@@ -1,49 +1,69 @@
 /* The paper's rules of a slot, compiled: one implementation for every backend (see
  * mission/rules.py, which states them and calls these functions). */
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "../native.h"
 
-extern const char *const IOUT_REWARD_TERMS;
+static const char *const ACTION_FIELDS[4] = {"heading", "speed", "aet_node", "uplink_node"};
 
-const char *iout_layout(void)
+/* The first action index of `actions` ((B, N, 4)) outside its range, as an error. */
+static int64_t check_actions(const Mission *m, const int64_t *actions, const char *where)
 {
-    static char layout[2048];
-    if (!layout[0]) {
-        strcat(layout,
-               "params:slot_s,horizon_slots,area_x_m,area_y_m,inv_diag_per_m,dock_x_m,dock_y_m,"
-               "dock_radius_m,v_max_mps,hotel_j,drag_power_w_at_1mps,k_reset,aoi_max,"
-               "deadline_speed_mps,fairness_lambda,fairness_min_deliveries,stall_distance_m,"
-               "margin_epsilon_j,collision_sigma_m,safety_distance_m,collision_distance_m,"
-               "energy_obs_ref_j,obs_high,w_docking_progress,w_aoi,"
-               "w_fairness,w_boundary,w_stall,w_energy_margin,w_infeasible_uplink,w_collision,"
-               "w_dock_first_entry,w_dock_all,w_deadline,w_undocked_at_end;"
-               "link:harvest_j,uplink_j,wet_per_m,data_per_m,spreading,min_distance_m;"
-               "network:nodes_m,energy_j,aoi,service_count,deliveries,mean_aoi,jain;"
-               "state:positions_m,headings_rad,speeds_mps,heading_sp,speed_sp,straight_end_m,"
-               "boundary_attempt,action,docked,dock_dist_m,deadline_slack_m,distance_m,"
-               "battery_j,propulsion_energy_j,yaw_energy_j,current_mps,slot,sum_mean_aoi,"
-               "sum_objective,aoi_after_mission,min_separation_m,collisions,all_docked_paid,"
-               "reward,terminated,truncated;"
-               "log:positions_m,headings_rad,speeds_mps,mean_aoi,jain,aet_nodes,uplink_nodes,"
-               "uplink_ok;terms:");
-        strcat(layout, IOUT_REWARD_TERMS);
-        strcat(layout, ";mission:n_envs,n_auvs,n_nodes,n_path,p,link,dtheta_rad,dv_mps,s,net,log,"
-                       "actions,end_positions_m,end_headings_rad,end_speeds_mps,"
-                       "propulsion_energy_j,yaw_energy_j,path_m,terms,obs");
+    int64_t high[4] = {m->heading_levels, m->speed_levels, m->n_nodes, m->n_nodes};
+    for (int64_t j = 0; j < m->n_envs * m->n_auvs * 4; j++) {
+        if (actions[j] >= 0 && actions[j] < high[j % 4])
+            continue;
+        int64_t e = j / (4 * m->n_auvs), auv = (j / 4) % m->n_auvs;
+        char env[32] = "";
+        if (m->n_envs > 1)
+            snprintf(env, sizeof env, "env %lld, ", (long long)e);
+        iout_fail("%s%sAUV %lld: %s index %lld is out of range; accepted 0 to %lld", where, env,
+                  (long long)auv, ACTION_FIELDS[j % 4], (long long)actions[j],
+                  (long long)(high[j % 4] - 1));
+        return IOUT_EACTION;
     }
-    return layout;
+    return IOUT_OK;
 }
 
-/* ------------------------------------------------------------------------- actions */
-int64_t iout_first_bad_action(const int64_t *actions, int64_t count, const int64_t *high,
-                              int64_t width)
+#define OBS_SIZE(name, per_auv, per_node, per_pair, fixed)                                      \
+    +(per_auv) * n + (per_node) * k + (per_pair) * n * k + (fixed)
+static int64_t observation_size(int64_t n, int64_t k) { return 0 IOUT_OBSERVATION(OBS_SIZE); }
+
+/* What every entry point checks of a Mission: its sizes against each other and against C's
+ * bounds, every env's slot in [0, T_max], and the action indices it is about to read (the
+ * slot's inputs, `actions`, or the state's last actions, `state_actions`). */
+int64_t iout_check_mission(const Mission *m, bool actions, bool state_actions)
 {
-    for (int64_t j = 0; j < count; j++)
-        if (actions[j] < 0 || actions[j] >= high[j % width])
-            return j;
-    return -1;
+    if (m->n_envs < 1 || m->n_auvs < 1 || m->n_auvs > IOUT_MAX_AUVS || m->n_nodes < 1 ||
+        m->n_nodes > IOUT_MAX_NODES || m->horizon_slots < 1 ||
+        m->horizon_slots != m->p->horizon_slots || m->heading_levels < 1 ||
+        m->speed_levels < 1 || m->n_path < 0 ||
+        m->n_obs != observation_size(m->n_auvs, m->n_nodes))
+        return iout_fail("mission sizes are inconsistent (envs %lld, AUVs %lld, nodes %lld, "
+                         "T_max %lld/%lld, levels %lld/%lld, path %lld, observation %lld): "
+                         "the mission's view was changed outside mission.core",
+                         (long long)m->n_envs, (long long)m->n_auvs, (long long)m->n_nodes,
+                         (long long)m->horizon_slots, (long long)m->p->horizon_slots,
+                         (long long)m->heading_levels, (long long)m->speed_levels,
+                         (long long)m->n_path, (long long)m->n_obs);
+    for (int64_t e = 0; e < m->n_envs; e++)
+        if (m->s.slot[e] < 0 || m->s.slot[e] > m->horizon_slots)
+            return iout_fail("env %lld is at slot %lld; accepted 0 to T_max = %lld (the "
+                             "mission state was changed outside the rules)",
+                             (long long)e, (long long)m->s.slot[e], (long long)m->horizon_slots);
+    if (actions && check_actions(m, m->actions, ""))
+        return IOUT_EACTION;
+    if (state_actions && check_actions(m, m->s.action, "the state's last action: "))
+        return IOUT_EACTION;
+    return IOUT_OK;
+}
+
+/* An angle wrapped to (-pi, pi], the one convention of every measured heading. */
+double iout_wrap_angle(double angle_rad)
+{
+    return M_PI - fmod(fmod(M_PI - angle_rad, 2 * M_PI) + 2 * M_PI, 2 * M_PI);
 }
 
 bool iout_in_area(const Params *p, double x, double y)
@@ -77,10 +97,14 @@ void iout_begin_env(const Mission *m, int64_t e)
     }
 }
 
-void iout_begin_slot(const Mission *m)
+int64_t iout_begin_slot(const Mission *m)
 {
+    int64_t status = iout_check_mission(m, true, false);
+    if (status)
+        return status;
     for (int64_t e = 0; e < m->n_envs; e++)
         iout_begin_env(m, e);
+    return IOUT_OK;
 }
 
 /* ------------------------------------------------------------------------- the slot */
@@ -96,7 +120,7 @@ static double deadline_slack_m(const Params *p, double dock_dist_m, bool docked,
 
 /* Sum over the slots left until T_max of the mean AoI if no node is served again:
  * sum_{j=1..L} min(a + j, A_max) per node, in closed form. */
-double iout_unserved_aoi_sum(const Params *p, int64_t slot, const double *aoi, int64_t k)
+double iout_unserved_aoi(const Params *p, int64_t slot, const double *aoi, int64_t k)
 {
     double left = (double)(p->horizon_slots - slot > 0 ? p->horizon_slots - slot : 0);
     double total = 0.0;
@@ -105,6 +129,15 @@ double iout_unserved_aoi_sum(const Params *p, int64_t slot, const double *aoi, i
         total += rising * aoi[j] + rising * (rising + 1) / 2 + (left - rising) * p->aoi_max;
     }
     return total / (double)k;
+}
+
+int64_t iout_unserved_aoi_sum(const Params *p, int64_t slot, const double *aoi, int64_t k,
+                              double *out)
+{
+    if (k < 1)
+        return iout_fail("iout_unserved_aoi_sum: %lld nodes; accepted at least 1", (long long)k);
+    *out = iout_unserved_aoi(p, slot, aoi, k);
+    return IOUT_OK;
 }
 
 /* Closest approach and collisions over a slot's path (S points of (N, 2), `stride` doubles
@@ -130,8 +163,8 @@ static void book_separation(const Mission *m, int64_t e, const double *path_m, i
 /* Log env e's state after `slot` slots (kept up to T_max). */
 static void record(const Mission *m, int64_t e, int64_t slot)
 {
-    int64_t n = m->n_auvs, t = m->p->horizon_slots;
-    if (slot > t)
+    int64_t n = m->n_auvs, t = m->horizon_slots;
+    if (slot < 0 || slot > t)
         return;
     const Log *log = &m->log;
     int64_t row = e * (t + 1) + slot;
@@ -170,7 +203,7 @@ void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
         s->yaw_energy_j[a] += yaw_energy_j[i];
         s->battery_j[a] -= propulsion_energy_j[i] + yaw_energy_j[i] + hotel_j;
     }
-    iout_serve(&m->net, e, n, k, m->link, p->k_reset, p->aoi_max, positions_m,
+    iout_serve_env(&m->net, e, n, k, m->link, p->k_reset, p->aoi_max, positions_m,
                s->action + 4 * a0 + 2, s->action + 4 * a0 + 3, 4, active,
                s->distance_m + a0 * k, uplink_ok, req_j, stored_j, harvested_j, delivered);
 
@@ -190,7 +223,7 @@ void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
     s->terminated[e] = all_docked || battery_empty;
     s->truncated[e] = slot >= p->horizon_slots && !s->terminated[e];
     bool ending = s->terminated[e] || s->truncated[e];
-    s->aoi_after_mission[e] = ending ? iout_unserved_aoi_sum(p, slot, m->net.aoi + e * k, k) : 0.0;
+    s->aoi_after_mission[e] = ending ? iout_unserved_aoi(p, slot, m->net.aoi + e * k, k) : 0.0;
     double mean_aoi = m->net.mean_aoi[e], jain = m->net.jain[e];
     int64_t deliveries = 0;
     for (int64_t j = 0; j < k; j++)
@@ -222,8 +255,8 @@ void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
     s->sum_objective[e] += mean_aoi + p->fairness_lambda * (1.0 - jain);
     book_separation(m, e, path_m, path_stride, n_path, was_docked);
     record(m, e, slot);
-    if (slot <= p->horizon_slots) {
-        int64_t row = (e * p->horizon_slots + slot - 1) * n;
+    if (slot <= m->horizon_slots) {
+        int64_t row = (e * m->horizon_slots + slot - 1) * n;
         for (int64_t i = 0; i < n; i++) {
             m->log.aet_nodes[row + i] = s->action[4 * (a0 + i) + 2];
             m->log.uplink_nodes[row + i] = s->action[4 * (a0 + i) + 3];
@@ -232,20 +265,27 @@ void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
     }
 }
 
-void iout_end_slot(const Mission *m)
+int64_t iout_end_slot(const Mission *m)
 {
+    int64_t status = iout_check_mission(m, false, true);
+    if (status)
+        return status;
     int64_t n = m->n_auvs;
     for (int64_t e = 0; e < m->n_envs; e++)
         iout_end_env(m, e, m->end_positions_m + 2 * n * e, m->end_headings_rad + n * e,
                      m->end_speeds_mps + n * e, m->propulsion_energy_j + n * e,
                      m->yaw_energy_j + n * e, m->path_m + 2 * n * e, 2 * n * m->n_envs,
                      m->n_path);
+    return IOUT_OK;
 }
 
 /* What follows from a restart's draws (positions, nodes): distances, dock distances, deadline
  * slack and the log's first entry, in the envs where `restarted`. */
-void iout_start(const Mission *m, const bool *restarted)
+int64_t iout_start(const Mission *m, const bool *restarted)
 {
+    int64_t status = iout_check_mission(m, false, false);
+    if (status)
+        return status;
     const Params *p = m->p;
     const State *s = &m->s;
     int64_t n = m->n_auvs, k = m->n_nodes;
@@ -261,6 +301,7 @@ void iout_start(const Mission *m, const bool *restarted)
         }
         record(m, e, s->slot[e]);
     }
+    return IOUT_OK;
 }
 
 /* ------------------------------------------------------------------------- observation */
@@ -270,45 +311,106 @@ double iout_node_energy_level(double energy_j, double ref_j, double high)
     return fmin(log10(1.0 + energy_j / ref_j) / 5.0, high);
 }
 
-void iout_node_energy_levels(const double *energy_j, int64_t count, double ref_j, double high,
-                             double *out)
+int64_t iout_node_energy_levels(const double *energy_j, int64_t count, double ref_j,
+                                double high, double *out)
 {
+    if (count < 0)
+        return iout_fail("iout_node_energy_levels: count %lld < 0", (long long)count);
     for (int64_t j = 0; j < count; j++)
         out[j] = iout_node_energy_level(energy_j[j], ref_j, high);
+    return IOUT_OK;
 }
 
-/* The flat observation of every env, group by group in the order of
- * mission.observation.OBSERVATION_LAYOUT (each loop below is one group). */
-void iout_observe(const Mission *m)
+/* The observation groups, one function each, named and ordered by IOUT_OBSERVATION
+ * (native.h): each writes env e's entries from `o` on and returns the end. */
+typedef double *(*ObservationGroup)(const Mission *m, int64_t e, double *o);
+
+static double *obs_auv_position(const Mission *m, int64_t e, double *o)
 {
-    const Params *p = m->p;
-    const State *s = &m->s;
-    int64_t n = m->n_auvs, k = m->n_nodes, size = 7 * n + 2 * k + n * k + 1;
-    for (int64_t e = 0; e < m->n_envs; e++) {
-        const double *xy = s->positions_m + 2 * n * e, *heading = s->headings_rad + n * e;
-        const double *aoi = m->net.aoi + k * e, *energy = m->net.energy_j + k * e;
-        const double *distance = s->distance_m + n * k * e;
-        double *o = m->obs + size * e;
-        for (int64_t i = 0; i < n; i++) { /* auv_position */
-            *o++ = xy[2 * i] / p->area_x_m;
-            *o++ = xy[2 * i + 1] / p->area_y_m;
-        }
-        for (int64_t i = 0; i < n; i++) { /* auv_heading */
-            *o++ = cos(heading[i]);
-            *o++ = sin(heading[i]);
-        }
-        for (int64_t i = 0; i < n; i++) /* auv_speed */
-            *o++ = s->speeds_mps[n * e + i] / p->v_max_mps;
-        for (int64_t i = 0; i < n; i++) /* docked */
-            *o++ = s->docked[n * e + i];
-        for (int64_t j = 0; j < k; j++) /* aoi */
-            *o++ = aoi[j] / p->aoi_max;
-        for (int64_t j = 0; j < k; j++) /* node_energy */
-            *o++ = iout_node_energy_level(energy[j], p->energy_obs_ref_j, p->obs_high);
-        for (int64_t ij = 0; ij < n * k; ij++) /* distance */
-            *o++ = distance[ij] * p->inv_diag_per_m;
-        for (int64_t i = 0; i < n; i++) /* dock_distance */
-            *o++ = s->dock_dist_m[n * e + i] * p->inv_diag_per_m;
-        *o = 1.0 - (double)s->slot[e] / (double)p->horizon_slots; /* time_remaining */
+    const double *xy = m->s.positions_m + 2 * m->n_auvs * e;
+    for (int64_t i = 0; i < m->n_auvs; i++) {
+        *o++ = xy[2 * i] / m->p->area_x_m;
+        *o++ = xy[2 * i + 1] / m->p->area_y_m;
     }
+    return o;
+}
+
+static double *obs_auv_heading(const Mission *m, int64_t e, double *o)
+{
+    const double *heading = m->s.headings_rad + m->n_auvs * e;
+    for (int64_t i = 0; i < m->n_auvs; i++) {
+        *o++ = cos(heading[i]);
+        *o++ = sin(heading[i]);
+    }
+    return o;
+}
+
+/* Speed over ground / V_max, clipped to the observation's top (a current can push an AUV
+ * faster than V_max). */
+static double *obs_auv_speed(const Mission *m, int64_t e, double *o)
+{
+    for (int64_t i = 0; i < m->n_auvs; i++)
+        *o++ = fmin(m->s.speeds_mps[m->n_auvs * e + i] / m->p->v_max_mps, m->p->obs_high);
+    return o;
+}
+
+static double *obs_docked(const Mission *m, int64_t e, double *o)
+{
+    for (int64_t i = 0; i < m->n_auvs; i++)
+        *o++ = m->s.docked[m->n_auvs * e + i];
+    return o;
+}
+
+static double *obs_aoi(const Mission *m, int64_t e, double *o)
+{
+    for (int64_t j = 0; j < m->n_nodes; j++)
+        *o++ = m->net.aoi[m->n_nodes * e + j] / m->p->aoi_max;
+    return o;
+}
+
+static double *obs_node_energy(const Mission *m, int64_t e, double *o)
+{
+    for (int64_t j = 0; j < m->n_nodes; j++)
+        *o++ = iout_node_energy_level(m->net.energy_j[m->n_nodes * e + j], m->p->energy_obs_ref_j,
+                                      m->p->obs_high);
+    return o;
+}
+
+static double *obs_distance(const Mission *m, int64_t e, double *o)
+{
+    int64_t nk = m->n_auvs * m->n_nodes;
+    for (int64_t ij = 0; ij < nk; ij++)
+        *o++ = m->s.distance_m[nk * e + ij] * m->p->inv_diag_per_m;
+    return o;
+}
+
+static double *obs_dock_distance(const Mission *m, int64_t e, double *o)
+{
+    for (int64_t i = 0; i < m->n_auvs; i++)
+        *o++ = m->s.dock_dist_m[m->n_auvs * e + i] * m->p->inv_diag_per_m;
+    return o;
+}
+
+static double *obs_time_remaining(const Mission *m, int64_t e, double *o)
+{
+    *o++ = 1.0 - (double)m->s.slot[e] / (double)m->p->horizon_slots;
+    return o;
+}
+
+#define OBS_FUNCTION(name, per_auv, per_node, per_pair, fixed) obs_##name,
+static const ObservationGroup OBSERVATION_GROUPS[] = {IOUT_OBSERVATION(OBS_FUNCTION)};
+
+/* The flat observation of every env, (B, n_obs), group by group. */
+int64_t iout_observe(const Mission *m)
+{
+    int64_t status = iout_check_mission(m, false, false);
+    if (status)
+        return status;
+    int64_t groups = sizeof OBSERVATION_GROUPS / sizeof OBSERVATION_GROUPS[0];
+    for (int64_t e = 0; e < m->n_envs; e++) {
+        double *o = m->obs + m->n_obs * e;
+        for (int64_t g = 0; g < groups; g++)
+            o = OBSERVATION_GROUPS[g](m, e, o);
+    }
+    return IOUT_OK;
 }

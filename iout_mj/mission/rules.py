@@ -25,45 +25,15 @@ import numpy as np
 from iout_mj import native
 from iout_mj.config import Config, RewardWeights
 from iout_mj.mission.observation import ENERGY_OBS_REF_J, OBS_HIGH
-from iout_mj.mission.rewards import REWARD_TERMS
-from iout_mj.mission.state import LogArrays, MissionArrays
 from iout_mj.types import FloatArray
 from iout_mj.world import propulsion
-from iout_mj.world.acoustics import LINK_DTYPE
-from iout_mj.world.network import NETWORK_STRUCT, NetworkArrays
 
 COLLISION_DISTANCE_M = 5.0
 """Two hulls (3 m long) closer than this in a slot count as one collision (per pair and slot)."""
 
-_SCALARS = (
-    ("slot_s", np.float64),
-    ("horizon_slots", np.int64),
-    ("area_x_m", np.float64),
-    ("area_y_m", np.float64),
-    ("inv_diag_per_m", np.float64),
-    ("dock_x_m", np.float64),
-    ("dock_y_m", np.float64),
-    ("dock_radius_m", np.float64),
-    ("v_max_mps", np.float64),
-    ("hotel_j", np.float64),
-    ("drag_power_w_at_1mps", np.float64),
-    ("k_reset", np.int64),
-    ("aoi_max", np.float64),
-    ("deadline_speed_mps", np.float64),
-    ("fairness_lambda", np.float64),
-    ("fairness_min_deliveries", np.int64),
-    ("stall_distance_m", np.float64),
-    ("margin_epsilon_j", np.float64),
-    ("collision_sigma_m", np.float64),
-    ("safety_distance_m", np.float64),
-    ("collision_distance_m", np.float64),
-    ("energy_obs_ref_j", np.float64),
-    ("obs_high", np.float64),
-)
-PARAMS_DTYPE = np.dtype(
-    [*_SCALARS, *((f"w_{f.name}", np.float64) for f in dataclasses.fields(RewardWeights))]
-)
-"""Every constant the rules read: the scalars above and the signed reward weights."""
+PARAMS_DTYPE = native.record_dtype("Params")
+"""Every constant the rules read (native.h's IOUT_PARAMS): scalars and the signed reward
+weights, at the compiled library's offsets."""
 
 
 def params(cfg: Config) -> np.ndarray:
@@ -95,66 +65,67 @@ def params(cfg: Config) -> np.ndarray:
         "obs_high": OBS_HIGH,
         **{f"w_{k}": v for k, v in dataclasses.asdict(r.weights).items()},
     }
-    record = np.zeros(1, dtype=PARAMS_DTYPE)
-    for name in PARAMS_DTYPE.names or ():
-        record[name] = values[name]
-    return record
+    native.require_names("Params", tuple(sorted(PARAMS_DTYPE.names or ())), tuple(sorted(values)))
+    record = native.allocate((1,), PARAMS_DTYPE)
+    for name, value in values.items():
+        record[name] = value
+    return native.read_only(record)
 
 
 def unserved_aoi_sum(params: np.ndarray, slot: int, aoi: FloatArray) -> float:
     """Sum over the slots left until T_max of the mean AoI if no node is served again (the
     compiled `iout_unserved_aoi_sum`, booked when an episode ends early)."""
     a = np.ascontiguousarray(aoi, dtype=float)
-    return float(
-        native.lib.iout_unserved_aoi_sum(native.address(params), slot, native.address(a), a.size)
+    out = ctypes.c_double()
+    native.call(
+        native.lib.iout_unserved_aoi_sum,
+        native.address(params),
+        slot,
+        native.address(a),
+        a.size,
+        ctypes.byref(out),
     )
+    return out.value
 
 
-STATE_STRUCT = native.pointers("State", MissionArrays._fields)
-LOG_STRUCT = native.pointers("Log", LogArrays._fields)
-INPUTS = (
-    "actions",
-    "end_positions_m",
-    "end_headings_rad",
-    "end_speeds_mps",
-    "propulsion_energy_j",
-    "yaw_energy_j",
-    "path_m",
-    "terms",
-    "obs",
+INPUTS = {
+    "actions": np.dtype(np.int64),
+    "end_positions_m": np.dtype(float),
+    "end_headings_rad": np.dtype(float),
+    "end_speeds_mps": np.dtype(float),
+    "propulsion_energy_j": np.dtype(float),
+    "yaw_energy_j": np.dtype(float),
+    "path_m": np.dtype(float),
+    "terms": np.dtype(float),
+    "obs": np.dtype(float),
+}
+"""The slot's inputs and outputs that `Mission` shares with the rules (IOUT_MISSION_IO)."""
+SIZES = (
+    "n_envs",
+    "n_auvs",
+    "n_nodes",
+    "horizon_slots",
+    "heading_levels",
+    "speed_levels",
+    "n_obs",
+    "n_path",
 )
-"""The slot's inputs and outputs, after the state in `Mission` (native.h)."""
+"""The sizes in a mission's view, which bound every index the rules use (checked in C)."""
+CONSTANTS = ("p", "link", "dtheta_rad", "dv_mps")
+"""The read-only constants a mission's view points to."""
 
-
-class MissionView(ctypes.Structure):
-    """`Mission` of native.h: what the compiled rules read and write for one `Mission`."""
-
-    _fields_ = [
-        ("n_envs", ctypes.c_int64),
-        ("n_auvs", ctypes.c_int64),
-        ("n_nodes", ctypes.c_int64),
-        ("n_path", ctypes.c_int64),
-        ("p", ctypes.c_void_p),
-        ("link", ctypes.c_void_p),
-        ("dtheta_rad", ctypes.c_void_p),
-        ("dv_mps", ctypes.c_void_p),
-        ("s", STATE_STRUCT),
-        ("net", NETWORK_STRUCT),
-        ("log", LOG_STRUCT),
-        *((name, ctypes.c_void_p) for name in INPUTS),
-    ]
-
-
-native.require_layout(
-    ";".join(
-        [
-            "params:" + ",".join(PARAMS_DTYPE.names or ()),
-            "link:" + ",".join(LINK_DTYPE.names or ()),
-            "network:" + ",".join(NetworkArrays._fields),
-            "state:" + ",".join(MissionArrays._fields),
-            "log:" + ",".join(LogArrays._fields),
-            "terms:" + ",".join(REWARD_TERMS),
-            "mission:" + ",".join(f[0] for f in MissionView._fields_),
-        ]
-    )
+native.require_fields(
+    "Mission",
+    {
+        **{name: np.dtype(np.int64) for name in SIZES},
+        **{name: None for name in (*CONSTANTS, "s", "net", "log")},
+        **INPUTS,
+    },
 )
+native.require_names(
+    "the reward weights",
+    tuple(f for f in PARAMS_DTYPE.names or () if f.startswith("w_")),
+    tuple(f"w_{f.name}" for f in dataclasses.fields(RewardWeights)),
+)
+MissionView = native.struct_type("Mission")
+"""`Mission` of native.h: what the compiled rules read and write for one `Mission`."""

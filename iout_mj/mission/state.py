@@ -4,7 +4,9 @@ Every array has the leading batch axes of the mission (`()` for one env, `(B,)` 
 environment `(*batch,)`, per AUV `(*batch, N)`, and so on. State is updated in place, so that
 `reset_rows(mask)` restarts some environments of a batch and leaves the others alone, and so
 that `arrays()`, the same memory with a batch axis always (one env: of one), is what the
-compiled rules (`mission.rules`) write.
+compiled rules (`mission.rules`) write. The compiled rules point into these arrays, so they
+cannot be rebound (`native.Frozen`), only written in place; `native.h` declares the same
+fields (IOUT_STATE, IOUT_LOG), checked at import by name and element type.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from iout_mj import native
 from iout_mj.types import BoolArray, FloatArray, IntArray
 
 SHAPES = {
@@ -41,7 +44,7 @@ def _array(axes: str, fill: Any = 0.0, dtype: type = float) -> Any:
 
 
 @dataclass
-class MissionState:
+class MissionState(native.Frozen):
     """Everything that changes during an episode, except the nodes (`SensorNetwork`)."""
 
     # Vehicles, per AUV.
@@ -89,7 +92,9 @@ class MissionState:
     @classmethod
     def zeros(cls, batch: tuple[int, ...], n_auvs: int, n_nodes: int) -> MissionState:
         """Every array allocated (zeros, or its reset value) for `batch` environments."""
-        return cls(**_allocate(cls, batch, n_auvs, n_nodes, 0))
+        state = cls(**_allocate(cls, batch, n_auvs, n_nodes, 0))
+        state._freeze()
+        return state
 
     def reset_rows(self, rows: Any) -> None:
         """Reset every array with a fixed reset value in the given batch rows."""
@@ -103,7 +108,7 @@ class MissionState:
 
 
 @dataclass
-class MissionLog:
+class MissionLog(native.Frozen):
     """Per-slot history of the episode (for metrics, figures and rendering): entry t of the
     states is the state after slot t (0: the start), entry t of the links is slot t + 1's."""
 
@@ -118,7 +123,9 @@ class MissionLog:
 
     @classmethod
     def zeros(cls, batch: tuple[int, ...], n_auvs: int, horizon_slots: int) -> MissionLog:
-        return cls(**_allocate(cls, batch, n_auvs, 0, horizon_slots))
+        log = cls(**_allocate(cls, batch, n_auvs, 0, horizon_slots))
+        log._freeze()
+        return log
 
     def arrays(self, batched: bool) -> Any:
         """The same arrays with a leading batch axis (a `LogArrays` of views)."""
@@ -131,7 +138,7 @@ def _allocate(cls: Any, batch: tuple[int, ...], n: int, k: int, t: int) -> dict[
         meta = f.metadata
         shape = (*batch, *SHAPES[meta["axes"]](n, k, t))
         fill = 0 if meta["fill"] is None else meta["fill"]
-        arrays[f.name] = np.full(shape, fill, dtype=meta["dtype"])
+        arrays[f.name] = native.allocate(shape, meta["dtype"], fill)
     return arrays
 
 
@@ -141,8 +148,11 @@ def _with_batch_axis(obj: Any, kind: Any, batched: bool) -> Any:
     return kind(*(getattr(obj, f)[one] for f in kind._fields))
 
 
-# The field lists are MissionState's and MissionLog's, in order (the C structs' order).
 MissionArrays = namedtuple(  # type: ignore[misc]
     "MissionArrays", [f.name for f in dataclasses.fields(MissionState)]
 )
 LogArrays = namedtuple("LogArrays", [f.name for f in dataclasses.fields(MissionLog)])  # type: ignore[misc]
+for _cls, _owner in ((MissionState, "State"), (MissionLog, "Log")):
+    native.require_fields(
+        _owner, {f.name: np.dtype(f.metadata["dtype"]) for f in dataclasses.fields(_cls)}
+    )

@@ -103,21 +103,12 @@ def uplink_energy_j(distance_m: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
     return uplink_power_w(distance_m, cfg) * cfg.data_s
 
 
-LINK_DTYPE = np.dtype(
-    [
-        ("harvest_j", np.float64),
-        ("uplink_j", np.float64),
-        ("wet_per_m", np.float64),
-        ("data_per_m", np.float64),
-        ("spreading", np.float64),
-        ("min_distance_m", np.float64),
-    ]
-)
+LINK_DTYPE = native.record_dtype("Link")
 """The link budget's distance-independent constants (`LinkBudget`), as the compiled rules
-read them."""
+read them (native.h's IOUT_LINK)."""
 
 
-class LinkBudget:
+class LinkBudget(native.Frozen):
     """The same link budget with every distance-independent term folded into a constant, for
     the per-slot hot path: per distance, one power and two exponentials.
 
@@ -140,27 +131,29 @@ class LinkBudget:
             / 10
         )
         ln10 = np.log(10.0)
-        self.constants = np.array(
-            [
-                (
-                    c_harvest_j,
-                    c_uplink_j,
-                    -float(thorp_absorption_db_per_km(cfg.f_wet_khz)) * ln10 / 1e4,
-                    float(thorp_absorption_db_per_km(cfg.f_data_khz)) * ln10 / 1e4,
-                    cfg.spreading_factor,
-                    MIN_DISTANCE_M,
-                )
-            ],
-            dtype=LINK_DTYPE,
-        )
-        """(1,) record of LINK_DTYPE."""
+        values = {
+            "harvest_j": c_harvest_j,
+            "uplink_j": c_uplink_j,
+            "wet_per_m": -float(thorp_absorption_db_per_km(cfg.f_wet_khz)) * ln10 / 1e4,
+            "data_per_m": float(thorp_absorption_db_per_km(cfg.f_data_khz)) * ln10 / 1e4,
+            "spreading": cfg.spreading_factor,
+            "min_distance_m": MIN_DISTANCE_M,
+        }
+        native.require_names("Link", tuple(sorted(LINK_DTYPE.names or ())), tuple(sorted(values)))
+        constants = native.allocate((1,), LINK_DTYPE)
+        for name, value in values.items():
+            constants[name] = value
+        self.constants = native.read_only(constants)
+        """(1,) record of LINK_DTYPE (read-only: the compiled rules read it)."""
+        self._freeze()
 
     def energies_j(self, distance_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(harvested energy per slot, uplink energy E_req) at each distance (any shape), by
         the compiled `iout_link_energies` that the slot rules use."""
         d = np.ascontiguousarray(distance_m, dtype=float)
         harvest, uplink = np.empty_like(d), np.empty_like(d)
-        native.lib.iout_link_energies_each(
+        native.call(
+            native.lib.iout_link_energies,
             native.address(self.constants),
             native.address(d),
             d.size,

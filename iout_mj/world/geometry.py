@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import functools
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from iout_mj.types import FloatArray, IntArray
+from iout_mj.types import FloatArray
 
 
 def norm_xy(v: FloatArray) -> FloatArray:
@@ -25,7 +24,7 @@ def unit_xy(angle_rad: FloatArray) -> FloatArray:
 
 
 def wrap_angle(angle_rad: Any) -> Any:
-    """Wrap angles to (-pi, pi]."""
+    """Wrap angles to (-pi, pi], the one convention of headings (C: `iout_wrap_angle`)."""
     return np.pi - np.mod(np.pi - np.asarray(angle_rad), 2 * np.pi)
 
 
@@ -33,10 +32,3 @@ def pairwise_distance_m(auv_xy: ArrayLike, nodes_xy: ArrayLike) -> FloatArray:
     """Distances (*batch, N, K) between N AUV positions and K node positions."""
     diff = np.asarray(auv_xy, dtype=float)[..., :, None, :] - np.asarray(nodes_xy)[..., None, :, :]
     return norm_xy(diff)
-
-
-@functools.cache
-def pair_indices(n: int) -> tuple[IntArray, IntArray]:
-    """(i, j) index arrays of the n (n - 1) / 2 unordered pairs i < j (cached: per step)."""
-    iu, ju = np.triu_indices(n, k=1)
-    return iu, ju
