@@ -22,12 +22,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from iout_mj.errors import IoutError
+
 LIBRARY = "iout_mj._native"
 SOURCES = ("native.h", "native.c", "*/*.c")
 """The library's sources, relative to the package (globs)."""
 
 
-class NativeError(ValueError):
+class NativeError(IoutError, ValueError):
     """The compiled rules refused what they were handed (the message says what and why)."""
 
 
