@@ -1,12 +1,14 @@
-"""Scenarios: node layouts and the one place where (config, N, K, layout) become a `Config`.
+"""Scenarios: node layouts and the one place where (config, N, K, layout, nodes, backend)
+become an `EnvSpec` (`resolve`).
 
-Every entry point (gymnasium, the VecEnvs, the CLI, evaluation, training, benchmarks) resolves
-its scenario here. Layouts:
+Every entry point (gymnasium, the VecEnvs, PettingZoo, the CLI, evaluation, training,
+benchmarks) resolves its scenario here. Layouts:
 
-- "paper": the paper's 7- or 13-node layout (the authors' code);
+- "paper": the paper's layout for K = 7 and 13, else one seeded layout per K
+  (`random_layout(K, seed=K)`), the same for every policy and episode;
 - "random": a new seeded layout every episode, drawn from the task RNG;
-- `fixed_config(N, K)`: the paper's layout for K = 7 and 13, else one seeded layout per K
-  (`random_layout(K, seed=K)`), the same for every policy and episode (evaluation, CLI).
+- "custom": the nodes a config sets itself (`scenario.nodes_m`) or a nodes file gives, kept
+  in every episode. A keyword that contradicts them is an error naming both.
 
 `SCENARIOS` names the scenarios the test suite runs every invariant over (`paper-k7`,
 `paper-k13`, `random-k{K}`), as dm_control's `suite.ALL_TASKS`.
@@ -15,18 +17,25 @@ its scenario here. Layouts:
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from iout_mj.backends.registry import BACKENDS
 from iout_mj.config import MAX_NODES, MIN_NODES, PAPER_LAYOUTS, Config, Point, ScenarioConfig
-from iout_mj.schema import ConfigError, require
+from iout_mj.schema import ConfigError, load_mapping, require
 
 LAYOUTS = ("paper", "random")
+"""Layouts a caller may ask for; "custom" is what a config's or a file's own nodes give."""
 ConfigLike = Config | dict[str, Any] | str | Path | None
 """What `config=` accepts everywhere: a Config, a dict, a YAML/JSON path, or None."""
+NodesLike = Sequence[Point] | str | Path | None
+"""What `nodes=` accepts: a sequence of (x, y) in metres, a CSV file of them, or None."""
+MAX_NODES_FILE_BYTES = 1 << 16
+"""A nodes file holds at most MAX_NODES rows: a larger one is refused unread."""
 
 
 @dataclass(frozen=True)
@@ -148,3 +157,144 @@ def fixed_config(n_auvs: int, n_nodes: int, base: ConfigLike = None) -> Config:
     one fixed layout per K (evaluation, missions, benchmarks)."""
     layout = "paper" if n_nodes in PAPER_LAYOUTS else "random"
     return make_config(n_auvs, n_nodes, layout, seed=n_nodes, base=load_config(base))
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """What an environment is: its resolved config (N and the nodes applied), its layout and
+    its backend. Every env, VecEnv, command and training run is built from one."""
+
+    config: Config
+    layout: str
+    """"paper", "random" (new nodes every episode) or "custom" (the config's own nodes)."""
+    backend: str
+
+    @property
+    def n_auvs(self) -> int:
+        return self.config.scenario.n_auvs
+
+    @property
+    def n_nodes(self) -> int:
+        return self.config.scenario.n_nodes
+
+    @property
+    def random_per_episode(self) -> bool:
+        return self.layout == "random"
+
+
+def _given(config: ConfigLike) -> tuple[Config, set[str]]:
+    """The config and the scenario keys its source sets itself (a Config object: those that
+    differ from the defaults)."""
+    if isinstance(config, (str, Path)):
+        mapping = load_mapping(config, "config file")
+        return Config.load(config), set(mapping.get("scenario") or {})
+    if isinstance(config, dict):
+        return Config.from_dict(config), set(config.get("scenario") or {})
+    cfg = load_config(config)
+    default = ScenarioConfig()
+    return cfg, {
+        k for k in ("n_auvs", "nodes_m") if getattr(cfg.scenario, k) != getattr(default, k)
+    }
+
+
+def read_nodes(nodes: NodesLike) -> tuple[Point, ...] | None:
+    """Node positions from a sequence or a CSV file (one `x, y` per row in metres; a header
+    row and `#` comments are allowed)."""
+    if nodes is None:
+        return None
+    if isinstance(nodes, (str, Path)):
+        path = Path(nodes)
+        if not path.is_file():
+            raise ConfigError(f"nodes file {path} does not exist or is not a regular file")
+        if path.stat().st_size > MAX_NODES_FILE_BYTES:
+            raise ConfigError(f"nodes file {path} is larger than {MAX_NODES_FILE_BYTES} bytes")
+        rows = []
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            cells = [c.strip() for c in line.split("#")[0].split(",")]
+            if cells == [""]:
+                continue
+            try:
+                values = [float(c) for c in cells]
+            except ValueError:
+                if not rows and number == 1:
+                    continue  # a header
+                raise ConfigError(
+                    f"{path}:{number}: {line.strip()!r} is not a row of numbers; accepted "
+                    "'x, y' in metres per row"
+                ) from None
+            if len(values) != 2:
+                raise ConfigError(
+                    f"{path}:{number}: {len(values)} values; accepted 'x, y' in metres (node "
+                    "depth is not modelled yet)"
+                )
+            rows.append((values[0], values[1]))
+        nodes = rows
+    try:
+        return tuple((float(x), float(y)) for x, y in nodes)
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"nodes={nodes!r} is invalid: accepted a list of (x, y) in metres"
+        ) from None
+
+
+def resolve(
+    config: ConfigLike = None,
+    n_auvs: int | None = None,
+    n_nodes: int | None = None,
+    layout: str | None = None,
+    backend: str = "kinematic",
+    nodes: NodesLike = None,
+) -> EnvSpec:
+    """The one scenario resolution: the env a caller asks for, checked.
+
+    Args:
+        config: a Config, a dict, a YAML/JSON path, or None (the paper's defaults).
+        n_auvs: AUVs; None takes the config's. Contradicting a config that sets N is an error.
+        n_nodes: nodes; None takes the config's (or the nodes'). Contradicting own nodes is an
+            error.
+        layout: "paper" or "random"; None: the config's or the file's own nodes if it sets
+            them, else "paper". Asking for a layout when the nodes are given is an error.
+        backend: a registered backend (`iout_mj.backends.registry.BACKENDS`).
+        nodes: explicit nodes (a sequence or a CSV file), instead of the config's.
+    """
+    if backend not in BACKENDS:
+        raise ConfigError(f"backend={backend!r} is invalid: accepted one of {tuple(BACKENDS)}")
+    if layout is not None and layout not in LAYOUTS:
+        raise ConfigError(f"layout={layout!r} is invalid: accepted one of {LAYOUTS}")
+    base, sets = _given(config)
+    own = read_nodes(nodes)
+    where = (
+        "nodes"
+        if own is not None
+        else f"config {config}"
+        if isinstance(config, (str, Path))
+        else "the config"
+    )
+    if own is None and "nodes_m" in sets:
+        own = base.scenario.nodes_m
+    elif own is not None and "nodes_m" in sets and own != base.scenario.nodes_m:
+        raise ConfigError(
+            "nodes= contradicts the config's own scenario.nodes_m: give one or the other"
+        )
+    if n_auvs is not None and "n_auvs" in sets and n_auvs != base.scenario.n_auvs:
+        raise ConfigError(
+            f"n_auvs={n_auvs} contradicts {where}, which sets n_auvs={base.scenario.n_auvs}: "
+            "give one or the other"
+        )
+    n = base.scenario.n_auvs if n_auvs is None else n_auvs
+    if own is not None:
+        if n_nodes is not None and n_nodes != len(own):
+            raise ConfigError(
+                f"n_nodes={n_nodes} contradicts {where}, which sets {len(own)} nodes: give one "
+                "or the other"
+            )
+        if layout is not None:
+            raise ConfigError(
+                f"layout={layout!r} contradicts {where}, which sets its own {len(own)} nodes: "
+                "leave the layout out to fly them"
+            )
+        scenario = dataclasses.replace(base.scenario, n_auvs=n, nodes_m=own)
+        return EnvSpec(base.replace(scenario=scenario), "custom", backend)
+    k = base.scenario.n_nodes if n_nodes is None else n_nodes
+    layout = layout or "paper"
+    return EnvSpec(fixed_config(n, k, base), layout, backend)

@@ -19,10 +19,9 @@ from iout_mj.backends.mujoco.task import book, command, start_episode, substeps_
 from iout_mj.backends.mujoco.warp_stepper import WarpStepper
 from iout_mj.mission import Mission
 from iout_mj.mission.tokens import observe_tokens
-from iout_mj.scenarios import ConfigLike, resolve_config
+from iout_mj.scenarios import ConfigLike, NodesLike, resolve
 from iout_mj.types import BoolArray, FloatArray
 
-BACKENDS = ("mujoco", "kinematic", "warp")
 OBSERVATIONS = ("flat", "tokens")
 DIVERGED = "physics diverged (MuJoCo reset the state)"
 
@@ -62,11 +61,12 @@ class MissionBatch:
         backend: str = "kinematic",
         n_auvs: int | None = None,
         n_nodes: int | None = None,
-        layout: str = "paper",
+        layout: str | None = None,
         config: ConfigLike = None,
         seed: int | None = None,
         nthread: int = 0,
         observation: str = "flat",
+        nodes: NodesLike = None,
     ):
         if observation not in OBSERVATIONS:
             raise ValueError(
@@ -74,13 +74,12 @@ class MissionBatch:
             )
         if not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
             raise ValueError(f"n_envs={n_envs!r} is invalid: accepted an integer >= 1")
-        if backend not in BACKENDS:
-            raise ValueError(f"backend={backend!r} is invalid: accepted one of {BACKENDS}")
         if not isinstance(nthread, (int, np.integer)) or nthread < 0:
             raise ValueError(f"nthread={nthread!r} is invalid: accepted an integer >= 0")
         self.n_envs, self.backend = int(n_envs), backend
-        self.cfg = resolve_config(config, n_auvs, n_nodes, layout)
-        self.mission = Mission(self.cfg, layout == "random", n_envs=self.n_envs)
+        self.env_spec = resolve(config, n_auvs, n_nodes, layout, backend, nodes)
+        self.cfg = self.env_spec.config
+        self.mission = Mission(self.cfg, self.env_spec.random_per_episode, n_envs=self.n_envs)
         self.random = np.random.RandomState(seed)
         self.physics: list[AUVPhysics] = []
         self.stepper: Stepper | WarpStepper | None = None

@@ -13,12 +13,13 @@ from iout_mj.backends.kinematic import KinematicEnvironment, move
 from iout_mj.backends.mujoco import vehicle
 from iout_mj.backends.mujoco.render import MissionRenderer
 from iout_mj.backends.mujoco.task import make_environment
+from iout_mj.backends.registry import SINGLE_ENV_BACKENDS
 from iout_mj.mission import OBS_HIGH, OBS_LOW, OBSERVATION_DOC, REWARD_TERMS, Mission
 from iout_mj.mission.observation import flatten_observation
-from iout_mj.scenarios import ConfigLike, resolve_config
+from iout_mj.scenarios import ConfigLike, NodesLike, resolve
 
 ENV_ID = "iout_mj/MultiAUV-v0"
-BACKENDS = ("mujoco", "kinematic")
+BACKENDS = SINGLE_ENV_BACKENDS
 RENDER_MODES = ("rgb_array", "rgb_array_list")
 
 
@@ -62,11 +63,14 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
     n_auvs: AUVs (1 to 4); None takes the config's.
     n_nodes: nodes (2 to 30); None takes the config's.
     backend: "mujoco" (physics) or "kinematic" (the paper's model, fast).
-    layout: "paper" (7 or 13 nodes) or "random" (a new seeded layout every episode).
+    layout: "paper" (the paper's nodes for K = 7 and 13, one seeded layout per K otherwise)
+        or "random" (a new seeded layout every episode); None: the config's own nodes if it
+        sets them (kept in every episode), else "paper" (`iout_mj.scenarios.resolve`).
     render_mode: None, "rgb_array" (the current frame) or "rgb_array_list" (every frame since
         the last `render()`: 8 per slot, from the physics substeps).
     config: a Config, dict, YAML/JSON path, or None for the paper's defaults.
     width, height: frame size in pixels.
+    nodes: the nodes, as a list of (x, y) in metres or a CSV file, instead of the config's.
 
     ## Version History
     v0: the paper's system on MuJoCo physics with measured propulsion energy.
@@ -83,26 +87,31 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         n_auvs: int | None = None,
         n_nodes: int | None = None,
         backend: str = "mujoco",
-        layout: str = "paper",
+        layout: str | None = None,
         render_mode: str | None = None,
         config: ConfigLike = None,
         width: int = 640,
         height: int = 480,
+        nodes: NodesLike = None,
     ):
         EzPickle.__init__(
-            self, n_auvs, n_nodes, backend, layout, render_mode, config, width, height
+            self, n_auvs, n_nodes, backend, layout, render_mode, config, width, height, nodes
         )
         if backend not in BACKENDS:
-            raise ValueError(f"backend={backend!r} is invalid: accepted one of {BACKENDS}")
+            raise ValueError(
+                f"backend={backend!r} is invalid for one env: accepted one of {BACKENDS} "
+                "(warp steps batches: iout_mj.envs.WarpVecEnv)"
+            )
         if render_mode not in (None, *RENDER_MODES):
             raise ValueError(
                 f"render_mode={render_mode!r} is invalid: accepted None or one of {RENDER_MODES}"
             )
-        self.cfg = resolve_config(config, n_auvs, n_nodes, layout)
+        self.env_spec = resolve(config, n_auvs, n_nodes, layout, backend, nodes)
+        self.cfg = self.env_spec.config
         self.backend = backend
         self.render_mode = render_mode
         self.width, self.height = width, height
-        random_layout = layout == "random"
+        random_layout = self.env_spec.random_per_episode
         self._env: Any
         if backend == "mujoco":
             self._env = make_environment(self.cfg, random_layout=random_layout)

@@ -44,7 +44,7 @@ class MultiAUVVectorEnv(VectorEnv):
         n_auvs: int | None = None,
         n_nodes: int | None = None,
         backend: str = "kinematic",
-        layout: str = "paper",
+        layout: str | None = None,
         config: ConfigLike = None,
         nthread: int = 0,
         render_mode: str | None = None,

@@ -70,10 +70,10 @@ class MultiAUVParallelEnv(ParallelEnv):
 
     def __init__(
         self,
-        n_auvs: int | None = 2,
-        n_nodes: int | None = 7,
+        n_auvs: int | None = None,
+        n_nodes: int | None = None,
         backend: str = "kinematic",
-        layout: str = "paper",
+        layout: str | None = None,
         config: ConfigLike = None,
     ):
         self.env = MultiAUVEnv(n_auvs, n_nodes, backend, layout, None, config)

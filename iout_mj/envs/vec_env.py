@@ -72,7 +72,7 @@ class MissionVecEnv(VecEnv):
         n_envs: int,
         n_auvs: int | None = None,
         n_nodes: int | None = None,
-        layout: str = "paper",
+        layout: str | None = None,
         config: ConfigLike = None,
         seed: int | None = None,
         nthread: int = 0,
