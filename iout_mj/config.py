@@ -36,8 +36,8 @@ uplink need stays below 1e190 J (float64 overflows at 1e308)."""
 MAX_FREQUENCY_KHZ = 200.0
 """Acoustic frequencies: Thorp's absorption is 51 dB/km here (see MAX_AREA_M)."""
 FREQUENCY_WHY = "higher, Thorp's absorption over the area's diagonal overflows the uplink energy"
-MAX_DURATION_S = 3600.0
-"""Slot and charging/uplink periods."""
+MIN_TIMESTEP_S, MAX_TIMESTEP_S = 1e-3, 0.25
+"""MuJoCo timestep: a longer Euler step overshoots the hull's 500 N/(m/s) speed servo."""
 MAX_HORIZON_SLOTS = 10_000
 """The log holds every slot (about 200 bytes per slot and env for 4 AUVs)."""
 MAX_WEIGHT = 1e6
@@ -45,14 +45,16 @@ MAX_WEIGHT = 1e6
 MAX_SUBSTEPS_PER_SLOT = 10_000
 """MuJoCo substeps per slot: the stepper records each one (about 700 bytes per scene with 4
 AUVs), so a slot of a 36-scene batch stays under 300 MB."""
-MAX_FLOW_STEP_M = 2.5
+MAX_DURATION_S = MAX_SUBSTEPS_PER_SLOT * MAX_TIMESTEP_S
+"""Slot and charging/uplink periods (2500 s)."""
+MAX_FLOW_STEP_M = 1.25
 """Water-relative travel of a hull in one physics timestep (fastest flow x timestep): the
-fins' lift diverges beyond about a hull length (3 m); measured stable at 2.5 m, divergent at
-5 m."""
-MAX_DRAG_STEP_KG = 20.0
+fins' lift diverges when the flow moves the hull most of its length (3 m) per step (measured
+with random manoeuvres: stable at 1.25 m, divergent at 2.5 m within 3 slots of 2500 s)."""
+MAX_DRAG_STEP_KG = 10.0
 """drag_factor x fastest flow x timestep, the drag's momentum change per unit speed in one
 explicit step, as a mass: a small part of the 247 kg hull, or Euler overshoots (measured:
-divergent from about 60 kg with a cross current, 150 kg without)."""
+stable at 10 kg, divergent at 20 kg with a 40 m/s cross flow)."""
 MAX_SPECTRAL_EFFICIENCY = 64.0
 """data_rate_bps / bandwidth_hz: 2^64 - 1 is an SNR of 193 dB, beyond any modem."""
 MIN_DRAG_FACTOR_NSPM2 = 4.5
@@ -292,8 +294,8 @@ class PhysicsConfig:
         in_range(
             self,
             "timestep_s",
-            1e-3,
-            0.25,
+            MIN_TIMESTEP_S,
+            MAX_TIMESTEP_S,
             "a longer Euler step overshoots the hull's 500 N/(m/s) speed servo",
         )
         require(
@@ -302,7 +304,13 @@ class PhysicsConfig:
             self.current_mps,
             f"components in [-{MAX_SPEED_MPS:g}, {MAX_SPEED_MPS:g}] m/s",
         )
-        in_range(self, "current_jitter_mps", 0.0, MAX_SPEED_MPS)
+        in_range(
+            self,
+            "current_jitter_mps",
+            0.0,
+            MAX_SPEED_MPS / math.sqrt(2.0),
+            "per axis; the vehicle must out-run it",
+        )
 
     @property
     def max_current_mps(self) -> float:
