@@ -1,13 +1,17 @@
 """Config: defaults, presets, round trips, and a clear error for each kind of bad input."""
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from iout_mj.config import PAPER_LAYOUTS, Config, MotionConfig, RewardWeights
+from iout_mj.experiments.ray_jobs import load_sweep
 from iout_mj.scenarios import fixed_config, make_config, random_layout, resolve_config
-from iout_mj.schema import ConfigError
+from iout_mj.schema import ConfigError, load_mapping
+from iout_mj.training import TrainConfig
 
 
 def test_paper_defaults():
@@ -114,3 +118,84 @@ def test_one_scenario_resolution_for_every_entry_point():
     assert fixed_config(1, 9, base).motion.hotel_power_w == 20.0
     with pytest.raises(ConfigError, match="layout='grid'"):
         resolve_config(None, 2, 7, "grid")
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        ({"reward": {"collision_sigma_m": 1e-200}}, r"collision_sigma_m=1e-200.*\[0.1, 20000\]"),
+        ({"acoustics": {"f_data_khz": 1e4}}, r"f_data_khz=10000.0.*\[0.1, 200\]"),
+        ({"reward": {"weights": {"aoi": 1e308}}}, r"weights\.aoi=1e\+308.*\[-1e\+06, 1e\+06\]"),
+        ({"acoustics": {"data_rate_bps": 2e6}}, r"data_rate_bps=2000000.0.*\[1, 64000\]"),
+        ({"network": {"k_reset": 2**63}}, r"k_reset=9223372036854775808.*\[1, 10000\]"),
+        ({"scenario": {"horizon_slots": 10**9}}, r"horizon_slots=1000000000.*\[1, 10000\]"),
+        ({"physics": {"timestep_s": 1e-6}}, r"timestep_s=1e-06.*\[0.001, 0.25\]"),
+        ({"motion": {"heading_levels": 10**9 + 1}}, r"heading_levels=1000000001.*3 to 101"),
+        (
+            {"motion": {"v_max_mps": 1}, "physics": {"current_mps": [3, 0]}},
+            r"current_mps=\(3.0, 0.0\).*out-run.*v_max_mps=1",
+        ),
+    ],
+)
+def test_configs_that_broke_the_model_are_refused_with_field_value_and_range(data, match):
+    with pytest.raises(ConfigError, match=match):
+        Config.from_dict(data)
+
+
+CONFIGS = Path(__file__).parents[1] / "training" / "configs"
+
+
+def test_every_shipped_config_loads():
+    env_configs = sorted((CONFIGS / "env").glob("*.yaml"))
+    train_configs = sorted(CONFIGS.glob("ppo-*.yaml")) + sorted(CONFIGS.glob("smoke*.yaml"))
+    assert len(env_configs) >= 3 and len(train_configs) >= 6
+    for path in env_configs:
+        Config.load(path)
+    for path in train_configs:
+        TrainConfig.load(path)
+    load_sweep(CONFIGS / "sweep-smoke.yaml")
+    assert load_mapping(CONFIGS / "rl-zoo3-ppo.yml", "rl-zoo3 file")
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "match"),
+    [
+        ("dup.yaml", "motion:\n  v_max_mps: 2\n  v_max_mps: 3\n", r"key 'v_max_mps' appears twice"),
+        ("dup.json", '{"motion": {"v_max_mps": 2, "v_max_mps": 3}}', r"'v_max_mps' appears twice"),
+        ("deep.yaml", "a: " + "[" * 400_000 + "]" * 400_000, "nested deeper than 32"),
+        ("deep.json", '{"a": ' + "[" * 400_000 + "]" * 400_000 + "}", "nested deeper than 32"),
+        ("self.yaml", "a: &a [*a]\n", "contains itself"),
+        (
+            "doubling.yaml",
+            "a0: &a0 [1]\n"
+            + "".join(f"a{i}: &a{i} [*a{i - 1}, *a{i - 1}]\n" for i in range(1, 31)),
+            "more than 100000 values",
+        ),
+    ],
+)
+def test_duplicate_keys_deep_nesting_and_expansion_are_refused(tmp_path, name, text, match):
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=rf"{name}: .*{match}"):
+        Config.load(path)
+
+
+def test_a_merge_key_may_be_overridden_and_json_strings_hold_brackets(tmp_path):
+    path = tmp_path / "merge.yaml"
+    path.write_text("base: &b {v_max_mps: 2}\nmotion:\n  <<: *b\n  v_max_mps: 3\n")
+    assert load_mapping(path, "f")["motion"] == {"v_max_mps": 3}
+    path = tmp_path / "brackets.json"
+    path.write_text(json.dumps({"name": "[[[[" * 20 + '\\"{{' * 20}))
+    assert load_mapping(path, "f")["name"].startswith("[[[[")
+
+
+def test_non_regular_files_are_refused_with_a_message(tmp_path):
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)  # opening it for reading would block without O_NONBLOCK
+    cases = {fifo: "is a FIFO", tmp_path: "is a directory", Path("/dev/null"): "character device"}
+    if Path("/proc/self/pagemap").exists():  # a regular /proc file that reads forever
+        cases[Path("/proc/self/pagemap")] = "cannot be read|larger than"
+    for path, match in cases.items():
+        with pytest.raises(ConfigError, match=match) as err:
+            Config.load(path)
+        assert str(path) in str(err.value)
