@@ -20,7 +20,7 @@ import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
 
@@ -30,8 +30,9 @@ from iout_mj.schema import ConfigError, load_mapping, require
 
 LAYOUTS = ("paper", "random")
 """Layouts a caller may ask for; "custom" is what a config's or a file's own nodes give."""
-ConfigLike = Config | dict[str, Any] | str | Path | None
-"""What `config=` accepts everywhere: a Config, a dict, a YAML/JSON path, or None."""
+ConfigLike: TypeAlias = "Config | EnvSpec | dict[str, Any] | str | Path | None"
+"""What `config=` accepts everywhere: a Config, a dict, a YAML/JSON path, None (the paper's
+defaults), or an `EnvSpec` that `resolve` made."""
 NodesLike = Sequence[Point] | str | Path | None
 """What `nodes=` accepts: a sequence of (x, y) in metres, a CSV file of them, or None."""
 MAX_NODES_FILE_BYTES = 1 << 16
@@ -127,6 +128,8 @@ def load_config(config: ConfigLike) -> Config:
         return Config()
     if isinstance(config, Config):
         return config
+    if isinstance(config, EnvSpec):
+        return config.config
     if isinstance(config, dict):
         return Config.from_dict(config)
     if isinstance(config, (str, Path)):
@@ -261,6 +264,16 @@ def resolve(
         raise ConfigError(f"backend={backend!r} is invalid: accepted one of {tuple(BACKENDS)}")
     if layout is not None and layout not in LAYOUTS:
         raise ConfigError(f"layout={layout!r} is invalid: accepted one of {LAYOUTS}")
+    if isinstance(config, EnvSpec):  # already resolved: keywords may only repeat it
+        asked = {"n_auvs": n_auvs, "n_nodes": n_nodes, "layout": layout}
+        have = {"n_auvs": config.n_auvs, "n_nodes": config.n_nodes, "layout": config.layout}
+        clash = {k: v for k, v in asked.items() if v is not None and v != have[k]}
+        if clash or nodes is not None:
+            raise ConfigError(
+                f"{clash or 'nodes='} contradicts the resolved scenario {have}: give one or "
+                "the other"
+            )
+        return dataclasses.replace(config, backend=backend)
     base, sets = _given(config)
     own = read_nodes(nodes)
     where = (

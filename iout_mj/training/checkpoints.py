@@ -142,8 +142,8 @@ def save_checkpoint(
     rng_tensors, rng_scalars = _rng_tensors(batch.random)
     tensors.update(rng_tensors)
     manifest = {
-        "n_auvs": cfg.n_auvs,
-        "n_nodes": cfg.n_nodes,
+        "n_auvs": cfg.env_spec.n_auvs,
+        "n_nodes": cfg.env_spec.n_nodes,
         "env_config": batch.cfg.to_dict(),
         "training_config": cfg.to_dict(),
         "run_state": asdict(state),

@@ -7,9 +7,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from iout_mj.config import MAX_AUVS, MAX_NODES, MIN_NODES, Config
-from iout_mj.paper import PAPER_LAYOUTS
-from iout_mj.scenarios import LAYOUTS
+from iout_mj.config import MAX_NODES, MIN_NODES, Config
+from iout_mj.scenarios import EnvSpec, resolve
 from iout_mj.schema import (
     ConfigError,
     build_dataclass,
@@ -90,12 +89,15 @@ class TrainConfig:
     shipped configs in training/configs."""
 
     name: str = "ppo"
-    n_auvs: int = 2
-    n_nodes: int = 7
-    layout: str = "paper"
+    n_auvs: int | None = None
+    """AUVs; None: the env config's."""
+    n_nodes: int | None = None
+    """Nodes; None: the env config's (its own nodes if it sets them, else 7)."""
+    layout: str | None = None
+    """"paper" or "random"; None: the env config's own nodes if it sets them, else "paper"."""
     env: Config = field(default_factory=Config)
-    """The env config trained on (current, noise, reward, physics...); its N, K and layout
-    are the three fields above."""
+    """The env config trained on (nodes, current, noise, reward, physics...); N, K and the
+    layout above resolve with it as everywhere (`scenarios.resolve`, `env_spec`)."""
     phases: tuple[PhaseConfig, ...] = (PhaseConfig(),)
     n_envs: int = 8
     n_steps: int = 512
@@ -127,21 +129,7 @@ class TrainConfig:
     def __post_init__(self) -> None:
         check_finite(self)
         require(bool(NAME.fullmatch(self.name)), "name", self.name, "letters, digits, - _ .")
-        require(1 <= self.n_auvs <= MAX_AUVS, "n_auvs", self.n_auvs, f"1 to {MAX_AUVS}")
-        require(
-            MIN_NODES <= self.n_nodes <= MAX_NODES,
-            "n_nodes",
-            self.n_nodes,
-            f"{MIN_NODES} to {MAX_NODES}",
-        )
-        require(self.layout in LAYOUTS, "layout", self.layout, f"one of {LAYOUTS}")
-        if self.layout == "paper":
-            require(
-                self.n_nodes in PAPER_LAYOUTS,
-                "n_nodes",
-                self.n_nodes,
-                f"{sorted(PAPER_LAYOUTS)} with layout 'paper'",
-            )
+        self.env_spec  # noqa: B018 (resolves the scenario: a contradiction raises here)
         in_range(self, "n_envs", 1, MAX_ENVS)
         in_range(self, "n_steps", 1, MAX_ROLLOUT_STEPS)
         in_range(self, "batch_size", 1, MAX_ROLLOUT_STEPS)
@@ -214,6 +202,12 @@ class TrainConfig:
         if self.policy == "mlp":
             return self.n_envs
         return self.n_envs * (self.node_range[1] - self.node_range[0] + 1) * len(self.noise_models)
+
+    @property
+    def env_spec(self) -> EnvSpec:
+        """The scenario trained on: the env config with N, K and the layout resolved (the
+        backend is each phase's)."""
+        return resolve(self.env, self.n_auvs, self.n_nodes, self.layout)
 
     @property
     def total_timesteps(self) -> int:

@@ -47,14 +47,7 @@ HELD_OUT_SEED = 1_000_000
 def scenario_env(cfg: TrainConfig, backend: str) -> Any:
     """The gymnasium env of the config's scenario (the warp backend's scenes are evaluated on
     C MuJoCo: the same physics, one env)."""
-    return gym.make(
-        ENV_ID,
-        n_auvs=cfg.n_auvs,
-        n_nodes=cfg.n_nodes,
-        backend="mujoco" if backend == "warp" else backend,
-        layout=cfg.layout,
-        config=cfg.env,
-    )
+    return gym.make(ENV_ID, backend="mujoco" if backend == "warp" else backend, config=cfg.env_spec)
 
 
 def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
@@ -72,7 +65,7 @@ def scenario_cells(cfg: TrainConfig) -> list[tuple[int, Config]]:
         env = dataclasses.replace(
             cfg.env,
             acoustics=dataclasses.replace(cfg.env.acoustics, noise_model=noise),
-            scenario=dataclasses.replace(cfg.env.scenario, n_auvs=cfg.n_auvs),
+            scenario=dataclasses.replace(cfg.env.scenario, n_auvs=cfg.env_spec.n_auvs),
         )
         cells += [(k, env) for k in range(lo, hi + 1)]
     return cells
@@ -85,9 +78,8 @@ def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bo
     threads = min(n_envs, os.cpu_count() or 1) if parallel and backend == "mujoco" else 0
     if cfg.policy == "tokens":
         return VecMonitor(ScenarioVecEnv(scenario_cells(cfg), n_envs, backend, seed, threads))
-    args = (n_envs, cfg.n_auvs, cfg.n_nodes, cfg.layout, cfg.env)
     kinds = {"kinematic": KinematicVecEnv, "mujoco": PhysicsVecEnv, "warp": WarpVecEnv}
-    return VecMonitor(kinds[backend](*args, seed=seed, nthread=threads))
+    return VecMonitor(kinds[backend](n_envs, config=cfg.env_spec, seed=seed, nthread=threads))
 
 
 def network(cfg: TrainConfig) -> dict[str, Any]:
