@@ -211,7 +211,7 @@ def read_nodes(nodes: NodesLike) -> tuple[Point, ...] | None:
             raise ConfigError(f"nodes file {path} does not exist or is not a regular file")
         if path.stat().st_size > MAX_NODES_FILE_BYTES:
             raise ConfigError(f"nodes file {path} is larger than {MAX_NODES_FILE_BYTES} bytes")
-        rows = []
+        rows: list[tuple[float, float]] = []
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             cells = [c.strip() for c in line.split("#")[0].split(",")]
             if cells == [""]:
