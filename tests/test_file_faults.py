@@ -68,9 +68,10 @@ def test_a_file_size_limit_gives_one_clear_error_and_keeps_the_checkpoint(tmp_pa
 
 
 def test_a_full_disk_gives_one_clear_error_and_keeps_the_checkpoint(tmp_path):
-    if shutil.which("unshare") is None or subprocess.run(
-        ["unshare", "-rm", "true"], capture_output=True
-    ).returncode:
+    if (
+        shutil.which("unshare") is None
+        or subprocess.run(["unshare", "-rm", "true"], capture_output=True).returncode
+    ):
         pytest.skip("no user and mount namespaces here to mount a small tmpfs")
     (tmp_path / "run").mkdir()
     mount = 'mount -t tmpfs -o size=1m tmpfs "$1" && exec "$2" -c "$3" "$1" enospc'

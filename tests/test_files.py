@@ -133,7 +133,7 @@ def test_a_huge_sparse_weights_file_is_refused_before_it_is_hashed(policy):
 def test_an_edited_checkpoint_manifest_is_refused_on_resume(run):
     edit_manifest(run / "last", reseal=False, run_state__num_timesteps=10**12)
     state_before = (run / "state.json").read_text()
-    with pytest.raises(PolicyError, match="policy.json does not match its SHA-256"):
+    with pytest.raises(PolicyError, match=r"policy.json does not match its SHA-256"):
         train(small_config(), run, resume=True, progress=False, parallel=False)
     assert (run / "state.json").read_text() == state_before  # nothing trained
 
@@ -157,7 +157,7 @@ def test_a_resealed_run_state_out_of_the_config_is_refused(run, changes, match):
 def test_an_edited_normalization_json_is_refused(run):
     path = run / "last" / NORMALIZATION
     path.write_text(path.read_text().replace("[", "[1e300, ", 1))
-    with pytest.raises(CheckpointError, match="normalization.json does not match the SHA-256"):
+    with pytest.raises(CheckpointError, match=r"normalization.json does not match the SHA-256"):
         read_run_state(run / "last", small_config())
 
 
@@ -215,7 +215,7 @@ def test_a_token_manifest_is_bounded_too(tmp_path, changes, match):
     if "k_max" in changes:  # keep the declared spaces consistent: only the size is wrong
         n_auvs, k = manifest["n_auvs"], changes["k_max"]
         changes = {**changes, "observation_size": min(token_size(n_auvs, k), 1 << 16)}
-        changes["action_nvec"] = manifest["action_nvec"][:2] + [k, k]
+        changes["action_nvec"] = [*manifest["action_nvec"][:2], k, k]
         changes["action_nvec"] *= n_auvs
     edit_manifest(folder, **changes)
     with pytest.raises(PolicyError, match=match):
@@ -272,7 +272,8 @@ def test_the_token_count_matches_for_other_sizes():
     obs = gym.spaces.Box(-1, 2, (token_size(n, k),))
     built = TokenPolicy(obs, gym.spaces.MultiDiscrete(nvec), lambda _: 0.0, k_max=k, width=width)
     logits = n * (4 + 3 + 2 * k)
-    assert token_parameters(n, k, 4, 3, width) == _built_parameters(built) + logits * logits + logits
+    transient = logits * logits + logits
+    assert token_parameters(n, k, 4, 3, width) == _built_parameters(built) + transient
     assert token_parameters(n, k, 4, 3, width) < MAX_PARAMETERS
 
 
@@ -322,7 +323,7 @@ def test_a_device_node_is_refused(policy):
         os.mknod(policy / WEIGHTS, 0o600 | stat.S_IFCHR, os.makedev(1, 5))  # /dev/zero
     except PermissionError:
         pytest.skip("creating a device node needs CAP_MKNOD")
-    with pytest.raises(PolicyError, match="weights.safetensors is a character device"):
+    with pytest.raises(PolicyError, match=r"weights.safetensors is a character device"):
         load_policy_folder(policy)
 
 
@@ -336,7 +337,7 @@ def test_the_command_line_reports_a_linked_file_without_a_traceback(policy, cli)
 def test_a_fifo_in_a_checkpoint_is_refused_on_resume(run):
     _fifo(run / "last" / NORMALIZATION)
     recover(run / "last")  # must not block on the FIFO, nor replace the damaged folder
-    with pytest.raises(CheckpointError, match="normalization.json is a FIFO"):
+    with pytest.raises(CheckpointError, match=r"normalization.json is a FIFO"):
         read_run_state(run / "last", small_config())
 
 
@@ -389,3 +390,14 @@ def test_a_new_policy_folder_replaces_the_old_whole(policy, tmp_path):
     save_policy(policy, loaded.policy, stats, {"n_auvs": 1, "n_nodes": 7, "note": "second"})
     assert read_manifest(policy)["note"] == "second"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["policy"]
+
+
+def test_export_writes_a_policy_that_acts_as_the_checkpoint(run, tmp_path):
+    kept = export_policy(run / "best", tmp_path / "shipped")
+    shipped, checkpoint = load_policy_folder(tmp_path / "shipped"), load_policy_folder(run / "best")
+    assert "rng" not in shipped.manifest and kept["eval_at_selection"]["num_timesteps"] > 0
+    obs = checkpoint.normalizer.mean.astype("float32")
+    assert (shipped.act(obs) == checkpoint.act(obs)).all()
+    assert sorted(p.name for p in (tmp_path / "shipped").iterdir()) == sorted(
+        [MANIFEST, MANIFEST_SHA256, WEIGHTS, NORMALIZATION]
+    )

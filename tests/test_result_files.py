@@ -91,14 +91,14 @@ def test_compare_refuses_a_malformed_results_file(results, rows, match):
 
 def test_compare_refuses_links_fifos_and_missing_files(results, tmp_path):
     (results / "results.json").unlink()
-    with pytest.raises(ResultFileError, match="results.json does not exist: accepted a folder"):
+    with pytest.raises(ResultFileError, match=r"results.json does not exist: accepted a folder"):
         compare.read_rows(results)
     (results / "results.json").symlink_to("/proc/self/environ")
-    with pytest.raises(ResultFileError, match="results.json is a symbolic link"):
+    with pytest.raises(ResultFileError, match=r"results.json is a symbolic link"):
         compare.read_rows(results)
     (results / "results.json").unlink()
     os.mkfifo(results / "results.json")
-    with pytest.raises(ResultFileError, match="results.json is a FIFO"):
+    with pytest.raises(ResultFileError, match=r"results.json is a FIFO"):
         compare.read_rows(results)
 
 
@@ -199,7 +199,7 @@ def test_bench_refuses_a_malformed_saved_run(tmp_path, change, match):
 def test_bench_refuses_a_file_that_is_not_json(tmp_path):
     path = tmp_path / "bench.json"
     path.write_text('{"machine": ')
-    with pytest.raises(ResultFileError, match="bench.json is not valid JSON"):
+    with pytest.raises(ResultFileError, match=r"bench.json is not valid JSON"):
         bench_report.read_result(path)
 
 

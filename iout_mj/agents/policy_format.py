@@ -383,8 +383,13 @@ def build_policy(manifest: dict[str, Any], tensors: dict[str, torch.Tensor]) -> 
             k_max, width = int(manifest["k_max"]), int(manifest["width"])
             policy = TokenPolicy(obs_space, act_space, lambda _: 0.0, k_max=k_max, width=width)
         else:
+            # every parameter is loaded below: SB3's orthogonal init (QR, ~1 s) would be lost
             policy = ActorCriticPolicy(
-                obs_space, act_space, lambda _: 0.0, net_arch=manifest.get("net_arch")
+                obs_space,
+                act_space,
+                lambda _: 0.0,
+                net_arch=manifest.get("net_arch"),
+                ortho_init=False,
             )
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise PolicyFormatError(f"the manifest's network cannot be built: {exc}") from exc
