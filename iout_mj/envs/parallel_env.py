@@ -19,9 +19,7 @@ from pettingzoo import ParallelEnv
 from iout_mj.envs.gym_env import MultiAUVEnv
 from iout_mj.mission import OBS_HIGH, OBS_LOW, Mission
 from iout_mj.mission.actions import ACTION_FIELDS, ActionError
-from iout_mj.mission.observation import node_energy_level
 from iout_mj.scenarios import ConfigLike
-from iout_mj.world.geometry import unit_xy
 
 
 def agent_observation_size(n_auvs: int, n_nodes: int) -> int:
@@ -32,24 +30,25 @@ def agent_observation_size(n_auvs: int, n_nodes: int) -> int:
 
 
 def agent_observations(m: Mission) -> np.ndarray:
-    """(N, D) float32: every agent's observation (see `agent_observation_size`)."""
-    s, net, cfg = m.state, m.network, m.cfg
-    n = m.n_auvs
+    """(N, D) float32: every agent's observation (see `agent_observation_size`), made of the
+    flat observation's groups, as the compiled rules scale them."""
+    s, n, k = m.state, m.n_auvs, m.n_nodes
+    g = m.observation()
     own = np.concatenate(
         [
-            s.positions_m * m.inv_area,
-            unit_xy(s.headings_rad),
-            (s.speeds_mps / cfg.motion.v_max_mps)[:, None],
-            s.docked[:, None].astype(float),
-            (s.dock_dist_m * m.inv_diag)[:, None],
+            g["auv_position"].reshape(n, 2),
+            g["auv_heading"].reshape(n, 2),
+            g["auv_speed"][:, None],
+            g["docked"][:, None],
+            g["dock_distance"][:, None],
         ],
         axis=1,
     )
     nodes = np.concatenate(
         [
-            np.broadcast_to(net.aoi / cfg.network.aoi_max, (n, m.n_nodes)),
-            np.broadcast_to(node_energy_level(net.energy_j), (n, m.n_nodes)),
-            s.distance_m * m.inv_diag,
+            np.broadcast_to(g["aoi"], (n, k)),
+            np.broadcast_to(g["node_energy"], (n, k)),
+            g["distance"].reshape(n, k),
         ],
         axis=1,
     )
@@ -58,7 +57,7 @@ def agent_observations(m: Mission) -> np.ndarray:
         rest = [j for j in range(n) if j != i]
         rel = (s.positions_m[rest] - s.positions_m[i]) * m.inv_area
         others.append(np.concatenate([rel.ravel(), s.docked[rest].astype(float)]))
-    time_left = np.full((n, 1), 1 - s.slot / cfg.scenario.horizon_slots)
+    time_left = np.broadcast_to(g["time_remaining"], (n, 1))
     parts = [own, nodes, np.array(others).reshape(n, -1), time_left, np.eye(n)]
     return np.concatenate(parts, axis=1).astype(np.float32)
 

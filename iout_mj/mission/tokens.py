@@ -4,7 +4,10 @@ K_max with a mask, so that a network with shared per-node weights serves any K.
 Flat layout, for N AUVs: [global G][AUV tokens N x A][node tokens K_max x F][node mask K_max].
 Bearings are relative to each AUV's heading setpoint (what the heading action changes), so a
 node straight ahead reads (cos, sin) = (1, 0) wherever it lies. Everything is scaled to about
-[-1, 2]; padded nodes are zeros with mask 0. Numpy only; works on batched missions.
+[-1, 2]; padded nodes are zeros with mask 0. The features the flat observation also has
+(positions, speeds, docked, AoI, node energy, distances, time remaining) are its groups, as
+the compiled rules scale them (`Mission.observation`); the rest is numpy here. Works on
+batched missions.
 """
 
 from __future__ import annotations
@@ -13,7 +16,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from iout_mj.mission.observation import node_energy_level
 from iout_mj.types import FloatArray
 from iout_mj.world.geometry import unit_xy, wrap_angle
 
@@ -58,20 +60,19 @@ def observe_tokens(mission: Mission, k_max: int = K_MAX) -> np.ndarray:
     if k > k_max:
         raise ValueError(f"{k} nodes do not fit a token observation of {k_max}")
     horizon = cfg.scenario.horizon_slots
-    left = 1 - s.slot / horizon
-    glob = np.stack(
-        np.broadcast_arrays(left, k / k_max, net.mean_aoi / cfg.network.aoi_max), axis=-1
-    )
+    flat = mission.observation()  # the scaled features shared with the flat observation
+    left = flat["time_remaining"][..., 0]
+    glob = np.stack(np.broadcast_arrays(left, k / k_max, flat["aoi"].mean(axis=-1)), axis=-1)
     heading = s.heading_sp[..., None]  # (*b, N, 1)
     dock_delta = mission.dock_m - s.positions_m
     eta = s.dock_dist_m / (ETA_CRUISE_MPS * cfg.scenario.slot_s) / horizon
     auv = [
-        s.positions_m * mission.inv_area,
+        flat["auv_position"].reshape(*batch, n, 2),
         unit_xy(s.heading_sp),
-        (s.speeds_mps / cfg.motion.v_max_mps)[..., None],
+        flat["auv_speed"][..., None],
         (s.speed_sp / cfg.motion.v_max_mps)[..., None],
-        s.docked[..., None].astype(float),
-        (s.dock_dist_m * mission.inv_diag)[..., None],
+        flat["docked"][..., None],
+        flat["dock_distance"][..., None],
         _bearing(dock_delta, s.heading_sp),
         np.clip(left[..., None] - eta, -1, 1)[..., None],
     ]
@@ -88,7 +89,7 @@ def observe_tokens(mission: Mission, k_max: int = K_MAX) -> np.ndarray:
     afford = np.clip(np.log10(np.maximum(net.energy_j[..., None, :], 1e-12) / need_j) / 3, -1, 2)
     per_auv = np.concatenate(
         [
-            (s.distance_m * mission.inv_diag)[..., None],
+            flat["distance"].reshape(*batch, n, k, 1),
             _bearing(node_delta, heading),
             afford[..., None],
         ],
@@ -97,9 +98,9 @@ def observe_tokens(mission: Mission, k_max: int = K_MAX) -> np.ndarray:
     nodes = np.concatenate(
         [
             net.nodes_m * mission.inv_area - 0.5,
-            (net.aoi / cfg.network.aoi_max)[..., None],
+            flat["aoi"][..., None],
             (net.service_count / cfg.network.k_reset)[..., None],
-            node_energy_level(net.energy_j)[..., None],
+            flat["node_energy"][..., None],
             np.moveaxis(per_auv, -3, -2).reshape(*batch, k, -1),
         ],
         axis=-1,
