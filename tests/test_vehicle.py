@@ -80,12 +80,12 @@ def test_energy_is_zero_at_rest_and_grows_as_speed_cubed():
     rest = physics_at(0.0)
     rest.set_commands(np.zeros(1), np.zeros(1))
     rest.step(500)
-    assert rest.mech_energy_j.sum() == pytest.approx(0.0, abs=1e-9)
+    assert rest.meter.work_j.sum() == pytest.approx(0.0, abs=1e-9)
     powers = []
     for v in (1.0, 2.0):
         p = physics_at(v)
         p.step(500)
-        powers.append(p.mech_energy_j[0, 0] / 25.0)
+        powers.append(p.meter.work_j[0, 0] / 25.0)
     assert powers[1] / powers[0] == pytest.approx(8.0, rel=0.01)
     assert powers[0] == pytest.approx(
         float(propulsion.drag_power_w(1.0, CFG1.motion)) * 0.7, rel=0.01

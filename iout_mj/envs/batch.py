@@ -107,9 +107,9 @@ class MissionBatch:
         """One slot for every environment: rewards, and which envs failed (physics diverged)."""
         if self.stepper is None:
             return move(self.mission, actions), self._none_failed
-        meters = command(self.mission, self.physics, actions)
+        command(self.mission, self.physics, actions)
         failed = self.stepper.step(self.physics, self.substeps)
-        return book(self.mission, self.physics, meters), failed
+        return book(self.mission, self.physics), failed
 
     def step(self, actions: Any) -> BatchStep:
         """Move every environment one slot, then restart those that ended (autoreset)."""

@@ -127,10 +127,9 @@ def steady_state(cfg: Config, speeds_mps: tuple[float, ...] | None = None) -> li
         physics.set_poses(np.array([[100.0, 500.0]]), np.zeros(1), np.array([v]))
         physics.set_commands(np.zeros(1), np.array([v]))
         physics.step(settle)
-        before = physics.mech_energy_j.sum()
+        physics.meter.start()
         physics.step(measure)
-        work_j = physics.mech_energy_j.sum() - before
-        measured = propulsion.electrical_energy_j(work_j, m) / MEASURE_S + m.hotel_power_w
+        measured = physics.meter.read_j().sum() / MEASURE_S + m.hotel_power_w
         model = float(propulsion.propulsion_power_w(v, m))
         rows.append(
             {
@@ -158,15 +157,14 @@ def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
     measured, model, model_path, distance, ends = [], [], [], [], []
     for heading_deg, speed in zip(man.heading_deg, man.speed_mps, strict=True):
         start = physics.positions_m()[0]
-        before = physics.mech_energy_j.sum()
+        physics.meter.start()
         physics.set_commands(np.radians([heading_deg]), np.array([speed]))
         physics.step(nstep)
         end = physics.positions_m()[0]
         d = float(np.linalg.norm(end - start))
         path = np.vstack([start, physics.substep_positions_m()[:, 0]])
         flown = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
-        work_j = physics.mech_energy_j.sum() - before
-        e = propulsion.electrical_energy_j(work_j, m) + propulsion.hotel_energy_j(slot_s, m)
+        e = physics.meter.read_j().sum() + propulsion.hotel_energy_j(slot_s, m)
         measured.append(float(e))
         model.append(float(propulsion.slot_energy_j(speed, d, slot_s, m)))
         model_path.append(float(propulsion.slot_energy_j(speed, flown, slot_s, m)))

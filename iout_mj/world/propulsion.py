@@ -36,9 +36,32 @@ def slot_energy_j(
     )
 
 
-def electrical_energy_j(mechanical_work_j: ArrayLike, motion: MotionConfig) -> FloatArray:
-    """The one energy meter: measured actuator work |F v| dt over eta_prop (no hotel load)."""
-    return np.asarray(mechanical_work_j, dtype=float) / motion.prop_efficiency
+class EnergyMeter:
+    """The one energy meter of N vehicles: the physics adds measured actuator work |F v| dt
+    (surge thrust and yaw, per AUV); `read_j` is the electrical energy since `start`, the work
+    over eta_prop (the hotel load is the mission's: `hotel_energy_j`)."""
+
+    def __init__(self, n_auvs: int, motion: MotionConfig):
+        self.motion = motion
+        self.work_j = np.zeros((n_auvs, 2))
+        """Integrated |force x velocity| per AUV: column 0 surge thrust, column 1 yaw."""
+        self._start_j = np.zeros((n_auvs, 2))
+
+    def add(self, work_j: FloatArray) -> None:
+        """Book measured work (N, 2) (the steppers, once per step)."""
+        self.work_j += work_j
+
+    def reset(self) -> None:
+        self.work_j[:] = 0.0
+        self._start_j[:] = 0.0
+
+    def start(self) -> None:
+        """Start a reading (e.g. at the start of a slot)."""
+        self._start_j[:] = self.work_j
+
+    def read_j(self) -> FloatArray:
+        """(N, 2) electrical energy since `start`: propulsion, yaw (no hotel load)."""
+        return (self.work_j - self._start_j) / self.motion.prop_efficiency
 
 
 def hotel_energy_j(duration_s: ArrayLike, motion: MotionConfig) -> FloatArray:

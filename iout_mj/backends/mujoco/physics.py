@@ -21,6 +21,7 @@ from mujoco import rollout
 from iout_mj.backends.mujoco import names, vehicle
 from iout_mj.config import Config
 from iout_mj.types import BoolArray, FloatArray, IntArray
+from iout_mj.world import propulsion
 from iout_mj.world.geometry import norm_xy, wrap_angle
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -88,8 +89,8 @@ class AUVPhysics(engine.Physics):
             [m.body(names.node_name(k)).id for k in range(cfg.scenario.n_nodes)], dtype=np.int64
         )
         self._stepper: Stepper | None = Stepper()
-        self.mech_energy_j = np.zeros((n, 2))
-        """Integrated |force x velocity| per AUV: column 0 surge thrust, column 1 yaw."""
+        self.meter = propulsion.EnergyMeter(n, cfg.motion)
+        """The AUVs' energy meter (measured actuator work)."""
         self.substep_qpos: FloatArray = np.zeros((0, m.nq))
         """(substeps, nq) qpos after every substep of the last step (until the next one)."""
 
@@ -141,7 +142,7 @@ class AUVPhysics(engine.Physics):
         v[self._vy] = speed_mps * np.sin(yaw_rad)
         v[self._vyaw] = 0.0
         self.set_commands(yaw_rad, speed_mps)
-        self.mech_energy_j[:] = 0.0
+        self.meter.reset()
         self.substep_qpos = np.zeros((0, self.model.ptr.nq))
         mujoco.mj_forward(self.model.ptr, self.data.ptr)
 
@@ -240,7 +241,7 @@ class Stepper:
         nq = m.nq
         for i, p in enumerate(physics):
             mujoco.mj_setState(models[i], p.data.ptr, state[i, -1], _STATE_SPEC)
-            p.mech_energy_j += work_j[i]
+            p.meter.add(work_j[i])
             p.substep_qpos = state[i, :, 1 : 1 + nq]  # a view: valid until the next step
         return diverged
 

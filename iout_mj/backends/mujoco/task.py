@@ -17,7 +17,6 @@ from dm_env import specs
 from iout_mj.backends.mujoco.physics import AUVPhysics
 from iout_mj.config import Config
 from iout_mj.mission import Mission
-from iout_mj.world import propulsion
 
 
 def start_episode(mission: Mission, physics: AUVPhysics, env: Any = ()) -> None:
@@ -30,34 +29,30 @@ def start_episode(mission: Mission, physics: AUVPhysics, env: Any = ()) -> None:
     )
 
 
-def command(mission: Mission, physics: Sequence[AUVPhysics], action: Any) -> np.ndarray:
-    """Apply an action: setpoints to every vehicle's servos. Returns the energy meters'
-    readings at the start of the slot, for `book`."""
+def command(mission: Mission, physics: Sequence[AUVPhysics], action: Any) -> None:
+    """Apply an action: setpoints to every vehicle's servos, and start the slot's energy
+    reading (`book` reads it)."""
     heading_sp, speed_sp = mission.begin_slot(action)
     n = mission.n_auvs
     for p, h, v in zip(physics, heading_sp.reshape(-1, n), speed_sp.reshape(-1, n), strict=True):
         p.set_commands(h, v)
-    return np.stack([p.mech_energy_j for p in physics])
+        p.meter.start()
 
 
-def book(mission: Mission, physics: Sequence[AUVPhysics], meters_before_j: np.ndarray) -> Any:
-    """Book the slot the vehicles have just flown (measured state and energy); returns the
-    reward (per environment)."""
+def book(mission: Mission, physics: Sequence[AUVPhysics]) -> Any:
+    """Book the slot the vehicles have just flown (measured state and energy since `command`);
+    returns the reward (per environment)."""
     b, layout = mission.batch, physics[0]  # every physics of the batch has one layout
     qpos = np.stack([p.data.ptr.qpos for p in physics]).reshape(*b, -1)
     qvel = np.stack([p.data.ptr.qvel for p in physics]).reshape(*b, -1)
     path = np.stack([p.substep_qpos for p in physics], axis=1)
-    mech = propulsion.electrical_energy_j(
-        np.stack([p.mech_energy_j for p in physics]).reshape(*b, -1, 2)
-        - meters_before_j.reshape(*b, -1, 2),
-        mission.cfg.motion,
-    )
+    energy_j = np.stack([p.meter.read_j() for p in physics]).reshape(*b, -1, 2)
     return mission.end_slot(
         layout.positions_m(qpos),
         layout.headings_rad(qpos),
         layout.speeds_mps(qvel),
-        mech[..., 0],
-        mech[..., 1],
+        energy_j[..., 0],
+        energy_j[..., 1],
         layout.positions_m(path.reshape(len(path), *b, -1)),
     )
 
@@ -69,7 +64,6 @@ class DataCollectionTask(base.Task):
         super().__init__(random=random)
         self.cfg = cfg
         self.mission = Mission(cfg, random_layout_per_episode=random_layout)
-        self._meters_j = np.zeros(0)
 
     def reseed(self, seed: int | None) -> None:
         self._random = np.random.RandomState(seed)
@@ -82,10 +76,10 @@ class DataCollectionTask(base.Task):
         return self.mission.actions.spec()
 
     def before_step(self, action: Any, physics: AUVPhysics) -> None:
-        self._meters_j = command(self.mission, [physics], action)
+        command(self.mission, [physics], action)
 
     def after_step(self, physics: AUVPhysics) -> None:
-        book(self.mission, [physics], self._meters_j)
+        book(self.mission, [physics])
 
     def get_observation(self, physics: AUVPhysics) -> dict[str, np.ndarray]:
         return self.mission.observation()

@@ -168,7 +168,7 @@ class WarpStepper:
             d = p.data.ptr
             d.qpos[:], d.qvel[:] = end_qpos[i], end_qvel[i]
             d.time += nstep * self.dt_s
-            p.mech_energy_j += work[i]
+            p.meter.add(work[i])
             p.substep_qpos = path[:, i]
         return diverged
 
