@@ -54,6 +54,7 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
     for folder in ("last", "best"):
         assert {p.name for p in (tmp_path / folder).iterdir()} == {
             "policy.json",
+            "policy.json.sha256",
             "weights.safetensors",
             "normalization.json",
         }

@@ -166,6 +166,7 @@ class TrainConfig:
             f"a non-empty list of {NOISE_MODELS}",
         )
         in_range(self, "width", 4, 1024)
+        require(self.width % 4 == 0, "width", self.width, "a multiple of 4 (the attention's heads)")
         require(
             self.envs <= MAX_ENVS,
             "n_envs",

@@ -32,12 +32,20 @@ from iout_mj.agents.token_policy import TokenPolicy
 from iout_mj.config import Config
 from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv, WarpVecEnv
 from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
+from iout_mj.errors import CheckpointError
 from iout_mj.mission.stats import episode_summary
 from iout_mj.mission.tokens import K_MAX
 from iout_mj.schema import ConfigError
 from iout_mj.training import imitation
 from iout_mj.training.callbacks import EvalCheckpointCallback, MissionLoggerCallback
-from iout_mj.training.checkpoints import Resumed, RunState, recover, restore, save_checkpoint
+from iout_mj.training.checkpoints import (
+    Resumed,
+    RunState,
+    read_run_state,
+    recover,
+    restore,
+    save_checkpoint,
+)
 from iout_mj.training.config import TrainConfig
 
 HELD_OUT_SEED = 1_000_000
@@ -183,22 +191,26 @@ def _start(cfg: TrainConfig, out: Path, resume: bool, overwrite: bool) -> None:
     """Check the run folder: a run to resume, or a folder free for a new run."""
     if resume:
         recover(out / "last")
+        recover(out / "best")
         if not (out / "last" / MANIFEST).is_file():
-            raise FileNotFoundError(f"nothing to resume in {out}: no complete last/ checkpoint")
+            raise CheckpointError(f"nothing to resume in {out}: no complete last/ checkpoint")
         if TrainConfig.load(out / "config.yaml") != cfg:
             raise ConfigError(f"--resume with a different config than {out / 'config.yaml'}")
         return
     existing = [name for name in RUN_FILES if (out / name).exists()]
     if existing and not overwrite:
-        raise FileExistsError(
+        raise CheckpointError(
             f"{out} already holds a run ({', '.join(existing)}): use --resume to continue it, "
             "--overwrite to start again, or another --out"
         )
     for name in existing:
         path = out / name
         shutil.rmtree(path) if path.is_dir() else path.unlink()
-    out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False).encode())
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        write_atomic(out / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False).encode())
+    except OSError as exc:
+        raise CheckpointError(f"cannot write {out / 'config.yaml'}: {exc.strerror or exc}") from exc
 
 
 def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path) -> Any:
@@ -233,7 +245,7 @@ def train(
     model: Any = None
     resumed: Resumed | None = None
     if resume:  # the run state is the checkpoint's own
-        state = RunState(**read_manifest(out / "last")["run_state"])
+        state = read_run_state(out / "last", cfg)
     bar = tqdm(
         total=cfg.total_timesteps,
         initial=state.num_timesteps,
