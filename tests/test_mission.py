@@ -176,3 +176,16 @@ def test_a_pickled_mission_steps_like_the_original_on_its_own_memory():
     FakeBackend(copy).step(action((0, 0), (1, 1)), ends + 50.0)
     assert copy.state.slot == 2 and m.state.slot == 1
     assert not np.array_equal(copy.state.positions_m, m.state.positions_m)
+
+
+def test_a_mission_with_a_non_finite_metric_is_never_reported_valid():
+    from iout_mj.experiments.mission import non_finite
+
+    metrics = {
+        "return": float("nan"),
+        "jain": 1.0,
+        "docked": [True, False],
+        "energy": [1.0, -np.inf],
+    }
+    assert non_finite(metrics) == ["return", "energy"]
+    assert non_finite({"return": -3.5, "policy": "greedy", "docked": [True]}) == []

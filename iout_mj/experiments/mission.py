@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import shutil
 import time
 from pathlib import Path
@@ -26,6 +27,18 @@ def use_bundled_ffmpeg() -> None:
     """Point mediapy at imageio-ffmpeg's static binary unless ffmpeg is on the PATH."""
     if shutil.which("ffmpeg") is None:
         mediapy.set_ffmpeg(imageio_ffmpeg.get_ffmpeg_exe())
+
+
+def non_finite(metrics: dict[str, Any]) -> list[str]:
+    """The names of the metrics holding NaN or inf (in lists too)."""
+    return [
+        key
+        for key, value in metrics.items()
+        if any(
+            isinstance(v, (float, np.floating)) and not math.isfinite(v)
+            for v in np.ravel(np.asarray(value, dtype=object))
+        )
+    ]
 
 
 def run_mission(
@@ -97,6 +110,9 @@ def run_mission(
         if writer is not None:
             writer.__exit__(None, None, None)
     elapsed = time.perf_counter() - start
+    bad = non_finite(metrics)
+    if bad and "error" not in metrics:
+        metrics["error"] = f"non-finite metrics: {', '.join(bad)}"
     metrics["valid"] = "error" not in metrics
     if frames:
         mediapy.write_image(out / f"{name}.png", frames[-1])
