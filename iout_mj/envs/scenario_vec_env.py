@@ -1,22 +1,31 @@
 """An SB3 VecEnv over a distribution of scenarios: one `MissionBatch` per cell (a number of
 nodes K and an env config, e.g. a noise model), token observations padded to K_MAX and one
 action space `MultiDiscrete([H, S, K_MAX, K_MAX] * N)`, so that one policy trains on all
-cells at once. The cells share one RNG (layouts and currents are drawn from it).
+cells at once. Each cell draws its layouts and currents from its own stream, seeded from the
+VecEnv's RNG, so a cell steps exactly as its batch would alone (`ScenarioCell.batch`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+from stable_baselines3.common.vec_env.base_vec_env import (
+    VecEnv,
+    VecEnvIndices,
+    VecEnvObs,
+    VecEnvStepReturn,
+)
 
 from iout_mj.config import Config
 from iout_mj.envs.batch import MissionBatch
-from iout_mj.envs.vec_env import MissionVecEnv, check_open, step_infos, thread_count
+from iout_mj.envs.vec_env import check_open, step_infos, thread_count
 from iout_mj.mission import OBS_HIGH, OBS_LOW
 from iout_mj.mission.tokens import K_MAX, token_size
+from iout_mj.schema import ConfigError
 
 
 def token_spaces(cfg: Config) -> tuple[gym.spaces.Box, gym.spaces.MultiDiscrete]:
@@ -28,16 +37,65 @@ def token_spaces(cfg: Config) -> tuple[gym.spaces.Box, gym.spaces.MultiDiscrete]
     )
 
 
-class ScenarioVecEnv(MissionVecEnv):
+@dataclass(frozen=True)
+class ScenarioCell:
+    """One scenario cell of a `ScenarioVecEnv` and the batch that steps its environments."""
+
+    name: str
+    """`k{K}_{noise model}` (a suffix `_{index}` where two cells would share it): the
+    TensorBoard prefix `cell/<name>/` of its reward terms and episode metrics."""
+    n_nodes: int
+    config: Config
+    batch: MissionBatch
+    envs: slice
+    """Its environments' indices in the VecEnv (observations, rewards, infos)."""
+
+    @property
+    def noise_model(self) -> str:
+        return self.config.acoustics.noise_model
+
+
+def _cell_names(cells: Sequence[tuple[int, Config]]) -> list[str]:
+    names = [f"k{k}_{cfg.acoustics.noise_model}" for k, cfg in cells]
+    return [f"{n}_{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
+
+
+def _check_shared(cells: Sequence[tuple[int, Config]]) -> None:
+    """Every cell has the first cell's N and action mapping (one policy acts in all)."""
+    if not cells:
+        raise ValueError("cells=[]: accepted a non-empty list of (n_nodes, config)")
+
+    def shared(cfg: Config) -> dict[str, int]:
+        m = cfg.motion
+        return {
+            "n_auvs": cfg.scenario.n_auvs,
+            "heading_levels": m.heading_levels,
+            "speed_levels": m.speed_levels,
+        }
+
+    first = shared(cells[0][1])
+    for i, (k, cfg) in enumerate(cells):
+        if shared(cfg) != first:
+            raise ConfigError(
+                f"cells[{i}] (K={k}) has {shared(cfg)}; accepted the first cell's {first}: one "
+                "policy acts in every cell"
+            )
+
+
+class ScenarioVecEnv(VecEnv):
     """B environments spread over scenario cells, random layouts.
 
     Args:
         cells: (K, config) of every cell; the configs share N and the action mapping.
         envs_per_cell: environments of each cell.
-        backend: "kinematic" or "mujoco".
-        seed: seeds the one RNG of all cells.
+        backend: "kinematic", "mujoco" or "warp".
+        seed: seeds the RNG that seeds every cell's stream (`set_random_state`).
         nthread: C threads of each cell's MuJoCo rollout (0 to the CPUs this process may
             use).
+
+    `cells` holds each cell's K, config, batch and environment indices; `term_values()` the
+    last step's reward terms of all environments. Stepping or resetting after `close()`
+    raises `RuntimeError`.
     """
 
     def __init__(
@@ -48,54 +106,95 @@ class ScenarioVecEnv(MissionVecEnv):
         seed: int | None = None,
         nthread: int = 0,
     ):
-        if not cells:
-            raise ValueError("cells: accepted a non-empty list of (n_nodes, config)")
-        n_auvs = cells[0][1].scenario.n_auvs
-        nthread = thread_count(nthread)
-        self.batches = [
-            MissionBatch(envs_per_cell, backend, n_auvs, k, "random", cfg, None, nthread, "tokens")
-            for k, cfg in cells
-        ]
+        _check_shared(cells)
+        n_auvs, nthread = cells[0][1].scenario.n_auvs, thread_count(nthread)
+        self.cells: list[ScenarioCell] = []
+        for i, ((k, cfg), name) in enumerate(zip(cells, _cell_names(cells), strict=True)):
+            batch = MissionBatch(
+                envs_per_cell, backend, n_auvs, k, "random", cfg, None, nthread, "tokens"
+            )
+            envs = slice(i * batch.n_envs, (i + 1) * batch.n_envs)
+            self.cells.append(ScenarioCell(name, k, cfg, batch, envs))
         self.backend = backend
-        self.cells = [(k, cfg) for k, cfg in cells]
-        self.batch = self.batches[0]  # the RNG holder (`random`, `set_random_state`)
-        self.cfg, self.mission = self.batch.cfg, self.batch.mission
+        self.cfg = self.cells[0].config
+        """The first cell's config (N and the action mapping are every cell's)."""
         self.render_mode = None
         self.closed = False
-        self._bounds = np.cumsum([0] + [b.n_envs for b in self.batches])
-        gym_obs, gym_act = token_spaces(self.cfg)
-        super(MissionVecEnv, self).__init__(int(self._bounds[-1]), gym_obs, gym_act)
-        self.set_random_state(np.random.RandomState(seed))
+        self.random = np.random.RandomState(seed)
+        self.cell_seeds: tuple[int, ...] = ()
+        super().__init__(self.cells[-1].envs.stop, *token_spaces(self.cfg))
+        self.set_random_state(self.random)
 
     def set_random_state(self, rng: np.random.RandomState) -> None:
-        """One RNG for every cell (layouts and currents are drawn from it)."""
-        for b in self.batches:
-            b.random = rng
+        """Seed every cell's stream from `rng` (one draw per cell, in order: `cell_seeds`),
+        dropping any seed given with `seed()` that the next `reset()` would otherwise apply."""
+        self.random = rng
+        self.cell_seeds = tuple(int(s) for s in rng.randint(2**32, size=len(self.cells)))
+        for cell, seed in zip(self.cells, self.cell_seeds, strict=True):
+            cell.batch.random = np.random.RandomState(seed)
         self._reset_seeds()
 
+    def term_values(self) -> np.ndarray:
+        """The last step's reward terms, (B, terms) in the order of REWARD_TERMS (a copy)."""
+        return np.concatenate([c.batch.mission.term_values for c in self.cells])
+
+    # ------------------------------------------------------------------ VecEnv
     def reset(self) -> VecEnvObs:
         check_open(self)
         seed = self._seeds[0]
         if seed is not None:
             self.set_random_state(np.random.RandomState(seed))
         self._reset_seeds()
-        for b in self.batches:
-            b.restart(None)
-        return np.concatenate([b.observe() for b in self.batches])
+        for c in self.cells:
+            c.batch.restart(None)
+        return np.concatenate([c.batch.observe() for c in self.cells])
+
+    def step_async(self, actions: np.ndarray) -> None:
+        check_open(self)
+        self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
         check_open(self)
         actions = np.asarray(self._actions)
-        bounds = zip(self.batches, self._bounds[:-1], strict=True)
-        steps = [b.step(actions[lo : lo + b.n_envs]) for b, lo in bounds]
+        steps = [c.batch.step(actions[c.envs]) for c in self.cells]
+        infos = [
+            i for c, s in zip(self.cells, steps, strict=True) for i in step_infos(s, c.batch.n_envs)
+        ]
         return (
             np.concatenate([s.obs for s in steps]),
             np.concatenate([s.rewards for s in steps]).astype(np.float32),
             np.concatenate([s.terminated | s.truncated for s in steps]),
-            [i for b, s in zip(self.batches, steps, strict=True) for i in step_infos(s, b.n_envs)],
+            infos,
         )
 
     def close(self) -> None:
-        for b in self.batches:
-            b.close()
+        for c in self.cells:
+            c.batch.close()
         self.closed = True
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        raise AttributeError(
+            f"set_attr({attr_name!r}): the environments of a ScenarioVecEnv live in its cells' "
+            "batches and have no per-environment attributes"
+        )
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kw: Any
+    ) -> list[Any]:
+        raise AttributeError(
+            f"env_method({method_name!r}): a ScenarioVecEnv has no per-environment objects; "
+            "use venv.cells[c].batch"
+        )
+
+    def env_is_wrapped(
+        self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None
+    ) -> list[bool]:
+        return [False] * len(self._get_indices(indices))
+
+    def _get_indices(self, indices: VecEnvIndices) -> Sequence[int]:
+        if indices is None:
+            return range(self.num_envs)
+        return [indices] if isinstance(indices, int) else list(indices)

@@ -9,33 +9,84 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from iout_mj.mission.stats import episode_summary
+from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
+from iout_mj.envs.vec_env import MissionVecEnv
+from iout_mj.mission import REWARD_TERMS
+from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
+
+CELL_EPISODE_KEYS = ("mean_aoi", "docking_rate", "jain", "delivered_bits")
+"""The episode metrics logged per scenario cell (all of `SUMMARY_KEYS` over all cells)."""
 
 
 class MissionLoggerCallback(BaseCallback):
-    """TensorBoard: every reward term, the episode metrics and the run's own fps."""
+    """TensorBoard at every rollout end: each reward term's mean over the rollout's steps and
+    environments (`reward/<term>`), the mean summary of the episodes that ended in it
+    (`episode/<key>`), the run's own fps and, on a `ScenarioVecEnv`, the same per scenario
+    cell (`cell/<name>/reward/<term>`, `cell/<name>/episode/<key>` for CELL_EPISODE_KEYS).
+
+    Per step it adds the batch's (B, terms) array into per-cell sums (numpy) and reads the
+    infos of the environments that ended; nothing is logged per step.
+    """
 
     def __init__(self, start_timesteps: int) -> None:
         super().__init__()
         self._t0 = time.perf_counter()
         self._n0 = start_timesteps
+        self._terms: Callable[[], np.ndarray] | None = None
+        self._names: list[str] = []
+        """The cells' names on a ScenarioVecEnv (else none: one group of all environments)."""
+        self._starts = np.zeros(1, dtype=np.intp)
+        """The first environment of every group (the cells, or all environments)."""
+        self._cell_of = self._envs = np.zeros(0, dtype=np.intp)
+
+    def _init_callback(self) -> None:
+        venv = self.training_env.unwrapped
+        if isinstance(venv, ScenarioVecEnv):
+            self._terms = venv.term_values
+            self._names = [c.name for c in venv.cells]
+            self._starts = np.array([c.envs.start for c in venv.cells], dtype=np.intp)
+        elif isinstance(venv, MissionVecEnv):
+            mission = venv.mission
+            self._terms = lambda: mission.term_values
+        n_envs = self.training_env.num_envs
+        self._cell_of = np.searchsorted(self._starts, np.arange(n_envs), side="right") - 1
+        self._envs = np.bincount(self._cell_of, minlength=len(self._starts))
+        self._clear()
+
+    def _clear(self) -> None:
+        self._sums = np.zeros((len(self._starts), len(REWARD_TERMS)))
+        self._steps = 0
+        self._episodes: list[list[dict[str, float]]] = [[] for _ in self._starts]
 
     def _on_step(self) -> bool:
-        mission = getattr(self.training_env.unwrapped, "mission", None)  # the batched VecEnvs
-        if mission is not None:
-            for k, v in mission.terms.items():
-                self.logger.record_mean(f"reward/{k}", float(np.mean(v)))
-        for info in self.locals["infos"]:
-            for k, v in info.get("reward_terms", {}).items():
-                self.logger.record_mean(f"reward/{k}", v)
-            if "metrics" in info:
-                for k, v in episode_summary(info["metrics"]).items():
-                    self.logger.record_mean(f"episode/{k}", v)
+        if self._terms is not None:
+            self._sums += np.add.reduceat(self._terms(), self._starts, axis=0)
+            self._steps += 1
+        infos = self.locals["infos"]
+        for e in np.flatnonzero(self.locals["dones"]):
+            if "metrics" in infos[e]:
+                self._episodes[self._cell_of[e]].append(episode_summary(infos[e]["metrics"]))
         return True
 
     def _on_rollout_end(self) -> None:
+        if self._steps:
+            cells = self._sums / (self._steps * self._envs[:, None])
+            overall = self._sums.sum(axis=0) / (self._steps * self._envs.sum())
+            for t, term in enumerate(REWARD_TERMS):
+                self.logger.record(f"reward/{term}", float(overall[t]))
+                for c, name in enumerate(self._names):
+                    self.logger.record(f"cell/{name}/reward/{term}", float(cells[c, t]))
+        every = [row for rows in self._episodes for row in rows]
+        for key in SUMMARY_KEYS if every else ():
+            self.logger.record(f"episode/{key}", float(np.mean([r[key] for r in every])))
+        for c, name in enumerate(self._names):
+            rows = self._episodes[c]
+            for key in CELL_EPISODE_KEYS if rows else ():
+                value = float(np.mean([r[key] for r in rows]))
+                self.logger.record(f"cell/{name}/episode/{key}", value)
         dt = time.perf_counter() - self._t0
         self.logger.record("time/fps_run", (self.model.num_timesteps - self._n0) / max(dt, 1e-9))
+        self._clear()
 
 
 class EvalCheckpointCallback(BaseCallback):
