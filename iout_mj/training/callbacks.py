@@ -22,7 +22,8 @@ class MissionLoggerCallback(BaseCallback):
     """TensorBoard at every rollout end: each reward term's mean over the rollout's steps and
     environments (`reward/<term>`), the mean summary of the episodes that ended in it
     (`episode/<key>`), the run's own fps and, on a `ScenarioVecEnv`, the same per scenario
-    cell (`cell/<name>/reward/<term>`, `cell/<name>/episode/<key>` for CELL_EPISODE_KEYS).
+    cell (`cell/<name>/reward/<term>`, `cell/<name>/episode/<key>` for CELL_EPISODE_KEYS);
+    also at the end of a phase that a callback stopped mid-rollout.
 
     Per step it adds the batch's (B, terms) array into per-cell sums (numpy) and reads the
     infos of the environments that ended; nothing is logged per step.
@@ -69,6 +70,16 @@ class MissionLoggerCallback(BaseCallback):
         return True
 
     def _on_rollout_end(self) -> None:
+        self._record()
+
+    def _on_training_end(self) -> None:
+        """A phase stopped by a callback ends inside its last rollout, which SB3 then neither
+        ends nor logs: log it here."""
+        if self._steps:
+            self._record()
+            self.logger.dump(self.num_timesteps)
+
+    def _record(self) -> None:
         if self._steps:
             cells = self._sums / (self._steps * self._envs[:, None])
             overall = self._sums.sum(axis=0) / (self._steps * self._envs.sum())
