@@ -8,9 +8,12 @@ and the gymnasium VectorEnv adapt (no stable-baselines3, no gymnasium here).
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from iout_mj.backends.kinematic import move
@@ -21,9 +24,38 @@ from iout_mj.mission import Mission
 from iout_mj.mission.tokens import observe_tokens
 from iout_mj.scenarios import ConfigLike, NodesLike, resolve
 from iout_mj.types import BoolArray, FloatArray
+from iout_mj.world.network import NETWORK_DTYPES
 
 OBSERVATIONS = ("flat", "tokens")
 DIVERGED = "physics diverged (MuJoCo reset the state)"
+PHYSICS_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+"""What a saved scene holds: time, qpos, qvel, act, controls, applied forces, warmstart."""
+MT_KEY_WORDS = 624
+"""Words of an MT19937 state (numpy's RandomState)."""
+
+
+def rng_arrays(rng: np.random.RandomState) -> dict[str, np.ndarray]:
+    """A RandomState's state as arrays: the MT19937 key, [position, has_gauss] and the
+    cached Gaussian (`set_rng` puts it back)."""
+    _, key, pos, has_gauss, cached = rng.get_state()  # type: ignore[misc]
+    return {
+        "key": np.array(key, dtype=np.uint32),
+        "pos": np.array([pos, has_gauss], dtype=np.int64),
+        "gauss": np.array([cached], dtype=float),
+    }
+
+
+def set_rng(rng: np.random.RandomState, arrays: Mapping[str, np.ndarray]) -> None:
+    """Put `rng_arrays` back into `rng` (in place); raises ValueError naming what is wrong."""
+    key, pos, gauss = (np.asarray(arrays[k]) for k in ("key", "pos", "gauss"))
+    if key.shape != (MT_KEY_WORDS,) or pos.shape != (2,) or gauss.shape != (1,):
+        raise ValueError(
+            f"RNG state of shapes key {key.shape}, pos {pos.shape}, gauss {gauss.shape}; "
+            f"accepted ({MT_KEY_WORDS},), (2,) and (1,)"
+        )
+    if not (0 <= pos[0] <= MT_KEY_WORDS and pos[1] in (0, 1)):
+        raise ValueError(f"RNG position {pos.tolist()}: accepted [0..{MT_KEY_WORDS}, 0 or 1]")
+    rng.set_state(("MT19937", key.astype(np.uint32), int(pos[0]), int(pos[1]), float(gauss[0])))
 
 
 @dataclass
@@ -129,6 +161,69 @@ class MissionBatch:
             self.restart(done)
             obs[done] = self.observe()[done]
         return BatchStep(obs, np.where(failed, 0.0, rewards), terminated, truncated, ended)
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of everything that changes as the batch steps, by name: the mission's state,
+        log, nodes and last reward terms, the RNG (`random.*`) and, for MuJoCo, every scene's
+        physics state and energy meter. `load_state_arrays` puts the batch back exactly where
+        it was; the rest (models, slot buffers) follows from the config and this."""
+        live = {name: np.array(value) for name, value in self._live_arrays().items()}
+        rng = {f"random.{k}": v for k, v in rng_arrays(self.random).items()}
+        return {**live, **rng, **self._scene_arrays()}
+
+    def load_state_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Put back what `state_arrays` gave, on a batch of the same config and size (the
+        mission's arrays are written in place: the compiled rules point into them).
+
+        Raises:
+            ValueError: an array is missing, extra, or of another shape or dtype than this
+                batch's (the message names it).
+        """
+        live = self._live_arrays()
+        rng = {f"random.{k}": v for k, v in rng_arrays(self.random).items()}
+        expected = {**live, **rng, **self._scene_arrays()}
+        if set(arrays) != set(expected):
+            raise ValueError(
+                f"saved batch state holds {sorted(set(arrays) ^ set(expected))} unlike this "
+                f"batch: accepted exactly the arrays {sorted(expected)}"
+            )
+        for name, target in expected.items():
+            saved = np.asarray(arrays[name])
+            if saved.shape != target.shape or saved.dtype != target.dtype:
+                raise ValueError(
+                    f"saved batch state {name} is {saved.dtype}{list(saved.shape)}; accepted "
+                    f"{target.dtype}{list(target.shape)}"
+                )
+        set_rng(self.random, {k: arrays[f"random.{k}"] for k in ("key", "pos", "gauss")})
+        for name, target in live.items():
+            target[...] = arrays[name]
+        for e, p in enumerate(self.physics):
+            p.place_scene(self.mission.network.nodes_m[e], self.mission.state.current_mps[e])
+            scene = np.array(arrays["physics.state"][e])
+            mujoco.mj_setState(p.model.ptr, p.data.ptr, scene, PHYSICS_STATE)
+            p.meter.work_j[...] = arrays["physics.work_j"][e]
+
+    def _scene_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of every MuJoCo scene's physics state and meter (none for kinematic)."""
+        if not self.physics:
+            return {}
+        size = mujoco.mj_stateSize(self.physics[0].model.ptr, PHYSICS_STATE)
+        scenes = np.empty((self.n_envs, size))
+        for p, row in zip(self.physics, scenes, strict=True):
+            mujoco.mj_getState(p.model.ptr, p.data.ptr, row, PHYSICS_STATE)
+        return {
+            "physics.state": scenes,
+            "physics.work_j": np.stack([p.meter.work_j for p in self.physics]),
+        }
+
+    def _live_arrays(self) -> dict[str, np.ndarray]:
+        """The mission's own arrays that change as it steps (not copies), by name."""
+        m = self.mission
+        out = {f"state.{f.name}": getattr(m.state, f.name) for f in dataclasses.fields(m.state)}
+        out.update({f"log.{f.name}": getattr(m.log, f.name) for f in dataclasses.fields(m.log)})
+        out.update({f"network.{name}": getattr(m.network, name) for name in NETWORK_DTYPES})
+        out["terms"] = m.term_values
+        return out
 
     def close(self) -> None:
         if self.stepper is not None:

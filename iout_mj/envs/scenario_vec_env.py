@@ -7,7 +7,7 @@ VecEnv's RNG, so a cell steps exactly as its batch would alone (`ScenarioCell.ba
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,8 +21,14 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from iout_mj.config import Config
-from iout_mj.envs.batch import MissionBatch
-from iout_mj.envs.vec_env import check_open, step_infos, thread_count
+from iout_mj.envs.batch import MissionBatch, rng_arrays, set_rng
+from iout_mj.envs.vec_env import (
+    batch_state_arrays,
+    check_open,
+    load_batch_state_arrays,
+    step_infos,
+    thread_count,
+)
 from iout_mj.mission import OBS_HIGH, OBS_LOW
 from iout_mj.mission.tokens import K_MAX, token_size
 from iout_mj.schema import ConfigError
@@ -137,6 +143,35 @@ class ScenarioVecEnv(VecEnv):
     def term_values(self) -> np.ndarray:
         """The last step's reward terms, (B, terms) in the order of REWARD_TERMS (a copy)."""
         return np.concatenate([c.batch.mission.term_values for c in self.cells])
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of everything that changes as the env steps: every cell's batch state, its
+        stream included (keyed '<cell index>.<name>', `MissionBatch.state_arrays`), the RNG
+        that seeds the cells (`random.*`) and `cell_seeds`; all a resumed run needs."""
+        out = batch_state_arrays([c.batch for c in self.cells])
+        out.update({f"random.{k}": v for k, v in rng_arrays(self.random).items()})
+        out["cell_seeds"] = np.array(self.cell_seeds, dtype=np.int64)
+        return out
+
+    def load_state_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Put back `state_arrays()` of a ScenarioVecEnv of the same cells and sizes, dropping
+        any seed given with `seed()`; raises ValueError naming what does not fit."""
+        cells = dict(arrays)
+        try:
+            seeds = np.asarray(cells.pop("cell_seeds"))
+            rng = {k: cells.pop(f"random.{k}") for k in ("key", "pos", "gauss")}
+        except KeyError as exc:
+            raise ValueError(
+                f"saved env state lacks {exc}: accepted ScenarioVecEnv.state_arrays()"
+            ) from exc
+        if seeds.shape != (len(self.cells),):
+            raise ValueError(
+                f"saved cell_seeds of shape {seeds.shape}; accepted ({len(self.cells)},)"
+            )
+        load_batch_state_arrays([c.batch for c in self.cells], cells)
+        set_rng(self.random, rng)
+        self.cell_seeds = tuple(int(s) for s in seeds)
+        self._reset_seeds()
 
     # ------------------------------------------------------------------ VecEnv
     def reset(self) -> VecEnvObs:

@@ -10,7 +10,7 @@ are `venv.mission.terms` (arrays of B), not per-step infos.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -50,6 +50,32 @@ def step_infos(step: BatchStep, n_envs: int) -> list[dict[str, Any]]:
             **final,
         }
     return infos
+
+
+def batch_state_arrays(batches: Sequence[MissionBatch]) -> dict[str, np.ndarray]:
+    """Every batch's `state_arrays`, keyed '<batch index>.<name>'."""
+    return {
+        f"{i}.{name}": value
+        for i, batch in enumerate(batches)
+        for name, value in batch.state_arrays().items()
+    }
+
+
+def load_batch_state_arrays(
+    batches: Sequence[MissionBatch], arrays: Mapping[str, np.ndarray]
+) -> None:
+    """Put back `batch_state_arrays(batches)`; raises ValueError naming what does not fit."""
+    per_batch: list[dict[str, np.ndarray]] = [{} for _ in batches]
+    for key, value in arrays.items():
+        index, _, name = key.partition(".")
+        if not index.isdigit() or int(index) >= len(batches):
+            raise ValueError(
+                f"saved env state {key!r}: accepted '<batch index>.<name>' with an index below "
+                f"{len(batches)}"
+            )
+        per_batch[int(index)][name] = value
+    for batch, saved in zip(batches, per_batch, strict=True):
+        batch.load_state_arrays(saved)
 
 
 class MissionVecEnv(VecEnv):
@@ -103,6 +129,21 @@ class MissionVecEnv(VecEnv):
         """Continue the batch's random stream from `rng` (a resumed run), dropping any seed
         given with `seed()` that the next `reset()` would otherwise apply."""
         self.batch.random = rng
+        self._reset_seeds()
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of everything that changes as the env steps (`MissionBatch.state_arrays`,
+        its RNG included), keyed '<batch index>.<name>': all a resumed run needs to continue."""
+        return batch_state_arrays([self.batch])
+
+    def load_state_arrays(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Put back `state_arrays()` of a vector env of the same config and size, dropping any
+        seed given with `seed()` that the next `reset()` would otherwise apply.
+
+        Raises:
+            ValueError: the arrays do not fit this env's batches (the message says which).
+        """
+        load_batch_state_arrays([self.batch], arrays)
         self._reset_seeds()
 
     # ------------------------------------------------------------------ VecEnv
