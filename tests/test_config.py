@@ -1,5 +1,6 @@
 """Config: defaults, presets, round trips, and a clear error for each kind of bad input."""
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -30,17 +31,31 @@ def test_round_trip(tmp_path, suffix):
     assert Config.load(path) == cfg
 
 
+# The paper's layouts as DESIGN.md section 4 lists them (the authors' code), metres.
+PAPER_7 = ((100, 100), (800, 500), (500, 900), (300, 700), (500, 200), (900, 200), (200, 400))
+PAPER_13 = (
+    *((100, 100), (800, 500), (500, 900), (300, 700), (200, 400), (900, 200), (500, 200)),
+    *((700, 800), (800, 200), (700, 300), (700, 100), (300, 100), (900, 700)),
+)
+
+
+def assert_seeded_layout(nodes_m, k):
+    """K nodes inside the 1000 m area, at least 80 m apart, outside the dock zone (70 m
+    around (830, 830))."""
+    nodes = np.array(nodes_m)
+    assert nodes.shape == (k, 2)
+    assert np.all((nodes >= 0) & (nodes <= 1000))
+    dist = np.linalg.norm(nodes[:, None] - nodes[None], axis=2) + np.eye(k) * 1e9
+    assert dist.min() >= 80.0
+    assert np.all(np.linalg.norm(nodes - [830, 830], axis=1) > 70)
+
+
 def test_presets_and_random_layouts():
-    assert make_config(1, 13).scenario.nodes_m == tuple(
-        (float(x), float(y)) for x, y in PAPER_LAYOUTS[13]
-    )
+    assert make_config(1, 13).scenario.nodes_m == PAPER_13
+    assert make_config(3, 7).scenario.nodes_m == PAPER_7
+    assert set(PAPER_LAYOUTS) == {7, 13}
     for k in (2, 9, 30):
-        nodes = np.array(random_layout(k, seed=k))
-        assert len(nodes) == k
-        assert np.all((nodes >= 0) & (nodes <= 1000))
-        dist = np.linalg.norm(nodes[:, None] - nodes[None], axis=2) + np.eye(k) * 1e9
-        assert dist.min() >= 80.0
-        assert np.all(np.linalg.norm(nodes - [830, 830], axis=1) > 70)
+        assert_seeded_layout(random_layout(k, seed=k), k)
     assert random_layout(9, seed=1) == random_layout(9, seed=1)
     assert random_layout(9, seed=1) != random_layout(9, seed=2)
 
@@ -110,11 +125,18 @@ def test_reward_weights_carry_their_signs():
 
 
 def test_one_scenario_resolution_for_every_entry_point():
-    assert resolve_config(None, 1, 13).scenario.nodes_m == make_config(1, 13).scenario.nodes_m
+    assert resolve_config(None, 1, 13).scenario.nodes_m == PAPER_13
+    assert resolve_config(None, 1, 13).scenario.n_auvs == 1
     fixed = fixed_config(2, 5)  # evaluation, mission, bench: one seeded layout per K
-    assert fixed.scenario.nodes_m == make_config(2, 5, "random", seed=5).scenario.nodes_m
-    assert fixed_config(2, 7) == make_config(2, 7)
+    assert_seeded_layout(fixed.scenario.nodes_m, 5)
     base = Config.from_dict({"motion": {"hotel_power_w": 20}})
+    for other in (fixed_config(2, 5), fixed_config(4, 5), fixed_config(1, 5, base)):
+        assert other.scenario.nodes_m == fixed.scenario.nodes_m  # the same for any N and base
+    assert fixed_config(2, 6).scenario.nodes_m[:5] != fixed.scenario.nodes_m
+    paper = fixed_config(2, 7)  # the paper's nodes, every other field the defaults
+    assert paper.scenario.nodes_m == PAPER_7 and paper.scenario.n_auvs == 2
+    assert paper.replace(scenario=Config().scenario) == Config()
+    assert dataclasses.replace(paper.scenario, nodes_m=PAPER_7) == Config().scenario
     assert fixed_config(1, 9, base).motion.hotel_power_w == 20.0
     with pytest.raises(ConfigError, match="layout='grid'"):
         resolve_config(None, 2, 7, "grid")

@@ -11,7 +11,6 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from iout_mj.envs import ENV_ID, MultiAUVEnv
 from iout_mj.experiments.bench_training import peak_rss_mb
-from iout_mj.mission import REWARD_TERMS
 from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError
 from iout_mj.world.geometry import wrap_angle
@@ -95,14 +94,31 @@ def test_pickle_round_trip(backend):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_reward_is_sum_of_terms(backend):
-    env = make(backend)
+def test_first_slot_reward_by_hand(backend):
+    """One AUV from (50, 50) due east at 1 m/s (both backends end the slot at (75, 50)),
+    charging and collecting from node 0 at (100, 100): every term and the reward by hand."""
+    cfg = scenario(make_config(1, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0)
+    env = make(backend, config=cfg)
     env.reset(seed=0)
-    env.action_space.seed(0)
-    for _ in range(10):
-        _, r, *_, info = env.step(env.action_space.sample())
-        assert set(info["reward_terms"]) == set(REWARD_TERMS)
-        assert r == pytest.approx(sum(info["reward_terms"].values()))
+    _, reward, *_, info = env.step(np.array([5, 3, 0, 0]))
+    dock = np.hypot(830.0 - 50.0, 830.0 - 50.0)
+    progress = 0.02 * (dock - np.hypot(830.0 - 75.0, 830.0 - 50.0))  # 25 m east
+    assert info["reward_terms"] == {
+        "docking_progress": pytest.approx(progress, rel=1e-6),
+        "aoi": pytest.approx(-0.1 * 2.0),  # every node aged from 1 to 2 (node 0: 1 of 3 updates)
+        "fairness": 0.0,  # 1 delivery, not more than 3
+        "boundary": 0.0,
+        "stall": 0.0,
+        # node 0 stores 0.1 J; the uplink from ~56 m needs ~0.6 mJ: tanh(~160) = 1, x 2.0 / N
+        "energy_margin": pytest.approx(2.0),
+        "infeasible_uplink": 0.0,
+        "collision": 0.0,  # one AUV
+        "docking": 0.0,
+        "deadline": 0.0,  # 1103 m from the dock, 54 x 25 s x 2 m/s = 2700 m of reach
+        "undocked_at_end": 0.0,
+        "aoi_after_mission": 0.0,
+    }
+    assert reward == pytest.approx(progress - 0.2 + 2.0, rel=1e-6)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
