@@ -1,8 +1,9 @@
 """`iout-mj`: link-budget, validate-energy, mission, render, evaluate, sweep, figures, train,
 bench.
 
-Exit codes: 0 done; 2 bad input (the message says what is accepted); 3 the physics diverged
-(the mission's metrics are written, marked invalid).
+Exit codes: 0 done; 1 a bug (the traceback is shown); 2 bad input (the message says what is
+accepted); 3 the physics diverged (the mission's metrics are written, marked invalid); 130
+interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -12,26 +13,22 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from iout_mj.agents.registry import POLICIES
+# Only light modules here: `iout-mj --help` must not wait for MuJoCo, torch or gymnasium's
+# envs. Each command imports what it runs (`commands`); the policy names shown in the help are
+# a constant that the tests hold equal to the registry.
 from iout_mj.agents.shipped import shipped_policies
-from iout_mj.cli_args import int_at_least, positive_distance
-from iout_mj.commands import (
-    cmd_bench,
-    cmd_compare,
-    cmd_evaluate,
-    cmd_export,
-    cmd_figures,
-    cmd_link_budget,
-    cmd_mission,
-    cmd_render,
-    cmd_sweep,
-    cmd_train,
-    cmd_validate_energy,
-)
-from iout_mj.envs import BACKENDS
-from iout_mj.errors import CheckpointError, PolicyError
+from iout_mj.backends.registry import SINGLE_ENV_BACKENDS as BACKENDS
+from iout_mj.cli_args import int_at_least, positive_distance, positive_seconds
+from iout_mj.errors import IoutError
 from iout_mj.scenarios import LAYOUTS
 from iout_mj.schema import ConfigError
+
+BASELINES = ("greedy", "round-robin", "random-walk", "planner", "comm-first", "tour-scheduler")
+"""The names of `agents.registry.POLICIES`, in its order."""
+ERRORS = (IoutError, ConfigError)
+"""Bad input, reported as a message and exit 2; any other exception is a bug (a traceback)."""
+INTERRUPTED = 130
+"""Exit code after Ctrl-C (128 + SIGINT, as shells report it)."""
 
 LAYOUT_HELP = (
     "paper: the paper's nodes for K = 7 and 13, one seeded layout per K otherwise; random: a new "
@@ -52,7 +49,7 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 def _policy_help() -> str:
     shipped = ", ".join(shipped_policies())
     return (
-        f"{', '.join(POLICIES)}, a shipped policy ({shipped}; ppo-general picks "
+        f"{', '.join(BASELINES)}, a shipped policy ({shipped}; ppo-general picks "
         "ppo-general-n<N> for the env's N) or a folder"
     )
 
@@ -109,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
-    p.set_defaults(func=cmd_link_budget)
+    p.set_defaults(func="cmd_link_budget")
 
     p = sub.add_parser(
         "validate-energy", help="cubic propulsion model vs MuJoCo actuator power", **fmt
@@ -117,24 +114,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.add_argument("--out", default="renders", help="folder for energy_validation.png")
     p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
-    p.set_defaults(func=cmd_validate_energy)
+    p.set_defaults(func="cmd_validate_energy")
 
     p = sub.add_parser("mission", help="one mission: metrics, trajectory figure, video", **fmt)
     _mission_arguments(p, width=960, height=540)
     p.add_argument("--out", default="renders", help="folder for mission.{mp4,png,json}")
     p.add_argument("--no-video", action="store_true", help="metrics and figure only (faster)")
-    p.set_defaults(func=cmd_mission)
+    p.set_defaults(func="cmd_mission")
 
     p = sub.add_parser("render", help="a mission to MP4 (headless EGL)", **fmt)
     _mission_arguments(p, width=1280, height=720)
     p.add_argument("--out", default="renders/mission.mp4", help="the MP4 to write")
-    p.set_defaults(func=cmd_render)
+    p.set_defaults(func="cmd_render")
 
     p = sub.add_parser("evaluate", help="seeded episodes per (policy, N, K): mean and std", **fmt)
     p.add_argument(
         "--policy",
         nargs="+",
-        default=["greedy", "round-robin", "random-walk", "planner", "comm-first", "tour-scheduler"],
+        default=list(BASELINES),
         help=_policy_help() + "; cells a trained policy cannot serve are skipped",
     )
     p.add_argument("--n-auvs", type=int_at_least(1), nargs="+", default=[1, 2], help="AUVs N")
@@ -149,7 +146,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int_at_least(0), default=0, help="episode e uses seed S + e")
     p.add_argument("--backend", choices=BACKENDS, default="mujoco", help="how vehicles move")
     p.add_argument(
-        "--workers", type=int_at_least(1), default=None, help="processes (default: one per core)"
+        "--workers",
+        type=int_at_least(1),
+        default=None,
+        help="processes, at most one per CPU (default: one per CPU)",
     )
     p.add_argument("--layout", choices=LAYOUTS, default="paper", help=LAYOUT_HELP)
     p.add_argument(
@@ -167,8 +167,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="run the episodes as Ray tasks: a local instance, or the cluster at ADDRESS",
     )
+    _ray_timeout(p)
     _trust_pickle(p)
-    p.set_defaults(func=cmd_evaluate)
+    p.set_defaults(func="cmd_evaluate")
 
     p = sub.add_parser(
         "sweep", help="Ray Tune trials over scenarios x seeds x hyperparameters", **fmt
@@ -188,7 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="a local Ray instance, or the cluster at ADDRESS",
     )
-    p.set_defaults(func=cmd_sweep)
+    _ray_timeout(p)
+    p.set_defaults(func="cmd_sweep")
 
     p = sub.add_parser("train", help="PPO on a scenario (YAML config); checkpoints, resume", **fmt)
     p.add_argument("--config", required=True, help="training/configs/<name>.yaml")
@@ -209,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--env-config",
         help="YAML/JSON env config instead of the config's env: (current, noise, reward, ...)",
     )
-    p.set_defaults(func=cmd_train)
+    p.set_defaults(func="cmd_train")
 
     p = sub.add_parser(
         "compare", help="a policy against a reference in every cell of an evaluation", **fmt
@@ -218,14 +220,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--policy", required=True, help="the policy's name in the results")
     p.add_argument("--reference", default="tour-scheduler", help="the policy to compare with")
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
-    p.set_defaults(func=cmd_compare)
+    p.set_defaults(func="cmd_compare")
 
     p = sub.add_parser(
         "export", help="a training checkpoint as a policy folder to ship or share", **fmt
     )
     p.add_argument("checkpoint", help="a run's best/ or last/ folder")
     p.add_argument("out", help="the policy folder to write (replaced whole)")
-    p.set_defaults(func=cmd_export)
+    p.set_defaults(func="cmd_export")
 
     p = sub.add_parser("bench", help="throughput benchmarks (ratios measured in one run)", **fmt)
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -244,27 +246,53 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         help="batch sizes B of --warp (default: 256 1024 4096 16384 on a GPU, 4 16 on a CPU)",
     )
-    p.set_defaults(func=cmd_bench)
+    p.set_defaults(func="cmd_bench")
 
     p = sub.add_parser("figures", help="the paper's figures from saved results", **fmt)
     p.add_argument("--results", help="folder written by evaluate --out")
     p.add_argument("--runs", nargs="+", help="training run folders (training curves)")
     p.add_argument("--out", help="folder for the PNGs (default: the results folder)")
-    p.set_defaults(func=cmd_figures)
+    p.set_defaults(func="cmd_figures")
     return parser
 
 
-ERRORS = (ConfigError, PolicyError, CheckpointError, ValueError, FileNotFoundError, FileExistsError)
+def _ray_timeout(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--ray-timeout",
+        type=positive_seconds,
+        default=30.0,
+        metavar="SECONDS",
+        help="how long to wait for the Ray cluster at ADDRESS to answer",
+    )
+
+
+def _interrupted(exc: BaseException | None) -> bool:
+    """Whether `exc` is Ctrl-C, or an error raised while handling it (a child process that the
+    same Ctrl-C ended, such as the video encoder)."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__context__
+    return False
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args))
-    except ERRORS as exc:
-        print(f"iout-mj {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        from iout_mj import commands  # the layers each command runs import when it runs
+
+        return int(getattr(commands, args.func)(args))
+    except BaseException as exc:
+        if _interrupted(exc):
+            sys.unraisablehook = lambda _: None  # what Ctrl-C left half-closed stays quiet
+            print(f"iout-mj {args.command}: interrupted", file=sys.stderr)
+            return INTERRUPTED
+        if isinstance(exc, ERRORS):
+            print(f"iout-mj {args.command}: error: {exc}", file=sys.stderr)
+            return 2
+        raise
 
 
 if __name__ == "__main__":

@@ -45,6 +45,14 @@ def positive_distance(text: str) -> float:
     return float(value)
 
 
+def positive_seconds(text: str) -> float:
+    """An argparse type: a duration > 0 s."""
+    value = _number(text, float, "a number; accepted a duration > 0 s")
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive duration; accepted > 0 s")
+    return float(value)
+
+
 def writable_dir(path: Path) -> Path:
     """Create `path` if needed and prove a file can be written there (before the work)."""
     try:

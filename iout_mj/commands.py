@@ -1,7 +1,10 @@
-"""The commands of `iout-mj`, one function each (the parser is in `cli`).
+"""The commands of `iout-mj`, one function each (the parser is in `cli`, which imports this
+module only once the arguments are parsed).
 
 Each command imports the layers it runs when it runs: torch and stable-baselines3 take about
-2 s to import, and `iout-mj link-budget` or `--help` should not wait for them.
+2 s to import, and `iout-mj link-budget` should not wait for them. A command that writes into
+an output folder holds that folder alone while it runs (`runtime.output_lock`): a second run
+into it is refused at once.
 """
 
 from __future__ import annotations
@@ -16,6 +19,9 @@ from typing import Any
 import numpy as np
 
 from iout_mj.cli_args import evaluation_config, scenario_from_flags, writable_dir
+from iout_mj.errors import UsageError
+from iout_mj.files import write_atomic
+from iout_mj.runtime import output_lock
 from iout_mj.scenarios import fixed_config, load_config
 from iout_mj.world import acoustics
 
@@ -67,9 +73,11 @@ def cmd_validate_energy(args: argparse.Namespace) -> int:
     from iout_mj.experiments import energy_validation  # heavy: see the module docstring
 
     cfg = fixed_config(1, 7, load_config(args.config))
-    figure = writable_dir(Path(args.out)) / "energy_validation.png"
+    out = writable_dir(Path(args.out))
+    figure = out / "energy_validation.png"
     print("validate-energy: steady state, manoeuvres, timestep test (about 5 s)", file=sys.stderr)
-    result = energy_validation.validate(cfg, figure=figure)
+    with output_lock(out, "validate-energy"):
+        result = energy_validation.validate(cfg, figure=figure)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -82,21 +90,28 @@ def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) ->
     from iout_mj.experiments.mission import run_mission  # heavy: see the module docstring
 
     cfg = scenario_from_flags(args.config, args.n_auvs, args.nodes, args.layout)
-    return run_mission(
-        policy=args.policy,
-        config=cfg,
-        layout=args.layout,
-        backend=args.backend,
-        seed=args.seed,
-        out=writable_dir(out),
-        video=video,
-        width=args.width,
-        height=args.height,
-        fps=args.fps,
-        slots=args.slots,
-        name=name,
-        trust_pickle=args.trust_pickle,
-    )
+    horizon = cfg.scenario.horizon_slots
+    if args.slots is not None and args.slots > horizon:
+        raise UsageError(
+            f"--slots {args.slots} is more than the mission's {horizon} slots: accepted 1 to "
+            f"{horizon} (stop early), or set scenario.horizon_slots in --config"
+        )
+    with output_lock(writable_dir(out), args.command):
+        return run_mission(
+            policy=args.policy,
+            config=cfg,
+            layout=args.layout,
+            backend=args.backend,
+            seed=args.seed,
+            out=out,
+            video=video,
+            width=args.width,
+            height=args.height,
+            fps=args.fps,
+            slots=args.slots,
+            name=name,
+            trust_pickle=args.trust_pickle,
+        )
 
 
 def _diverged(summary: dict[str, Any], command: str) -> int:
@@ -115,16 +130,23 @@ def cmd_mission(args: argparse.Namespace) -> int:
 def cmd_render(args: argparse.Namespace) -> int:
     video = Path(args.out)
     if video.suffix != ".mp4":
-        raise ValueError(f"--out {video}: accepted a path ending in .mp4")
+        raise UsageError(f"--out {video}: accepted a path ending in .mp4")
     summary = _run_mission(args, video.parent, video.stem, video=True)
     print(f"{video} ({summary['video_frames']} frames), {video.with_suffix('.png')}")
     return _diverged(summary, "render")
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    out = writable_dir(Path(args.out)) if args.out else None
+    if out is None:
+        return _evaluate(args, None)
+    with output_lock(out, "evaluate"):
+        return _evaluate(args, out)
+
+
+def _evaluate(args: argparse.Namespace, out: Path | None) -> int:
     from iout_mj.experiments import evaluate  # heavy: see the module docstring
 
-    out = writable_dir(Path(args.out)) if args.out else None
     base = evaluation_config(args.config)
     skipped: list[str] = []
     rows, episodes = evaluate.evaluate(
@@ -140,6 +162,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         layout=args.layout,
         base=base,
         ray_address=args.ray,
+        ray_timeout_s=args.ray_timeout,
     )
     for note in skipped:
         print(note, file=sys.stderr)
@@ -158,13 +181,15 @@ def cmd_figures(args: argparse.Namespace) -> int:
     from iout_mj.experiments import figures  # matplotlib: see the module docstring
 
     if not args.results and not args.runs:
-        raise ValueError("figures: give --results DIR and/or --runs RUN [RUN ...]")
+        raise UsageError("figures: give --results DIR and/or --runs RUN [RUN ...]")
     out = writable_dir(Path(args.out or args.results or "renders"))
-    if args.results:
-        for path in figures.figures_from_results(Path(args.results), out):
-            print(path)
-    if args.runs:
-        print(figures.training_curves([Path(r) for r in args.runs], out / "training_curves.png"))
+    with output_lock(out, "figures"):
+        if args.results:
+            for path in figures.figures_from_results(Path(args.results), out):
+                print(path)
+        if args.runs:
+            runs = [Path(r) for r in args.runs]
+            print(figures.training_curves(runs, out / "training_curves.png"))
     return 0
 
 
@@ -180,7 +205,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.env_config is not None:
         cfg = dataclasses.replace(cfg, env=load_config(args.env_config))
     out = writable_dir(Path(args.out or f"runs/{name}"))
-    state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
+    with output_lock(out, "train"):
+        state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
     summary = {
         "out": str(out),
         "num_timesteps": state.num_timesteps,
@@ -222,20 +248,17 @@ def cmd_bench(args: argparse.Namespace) -> int:
         say = lambda stage: print(f"bench: {stage} ...", file=sys.stderr)  # noqa: E731
         warp = bench_warp.run(args.warp_sizes, say=say)
         if args.out:
-            Path(args.out).write_text(json.dumps(warp, indent=2) + "\n")
+            _write_json(Path(args.out), warp)
         print(json.dumps(warp, indent=2) if args.json else bench_warp.format_table(warp))
         return 0
     if args.from_json:
-        path = Path(args.from_json)
-        if not path.is_file():
-            raise FileNotFoundError(f"--from-json {path} does not exist")
-        result = json.loads(path.read_text())
+        result = bench_report.read_result(Path(args.from_json))
     else:
         result = bench.run_all(
             quick=args.quick, say=lambda stage: print(f"bench: {stage} ...", file=sys.stderr)
         )
     if args.out:
-        Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+        _write_json(Path(args.out), result)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -244,10 +267,19 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _write_json(path: Path, data: Any) -> None:
+    """`data` as JSON in `path`, replaced whole; a failed write is a `UsageError`."""
+    try:
+        write_atomic(path, (json.dumps(data, indent=2) + "\n").encode())
+    except OSError as exc:
+        raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from exc
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     from iout_mj.experiments import ray_jobs  # ray is optional: imported only when asked
 
     out = writable_dir(Path(args.out))
-    result = ray_jobs.sweep(args.config, out, args.ray)
+    with output_lock(out, "sweep"):
+        result = ray_jobs.sweep(args.config, out, args.ray, args.ray_timeout)
     print(json.dumps(result, indent=2))
     return 0

@@ -8,9 +8,12 @@ seeded layout per K, the same for every policy and episode.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import multiprocessing as mp
-import os
+import signal
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import product
 from pathlib import Path
@@ -24,8 +27,10 @@ from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
 from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
-from iout_mj.errors import PolicyError, PolicyMismatchError
+from iout_mj.errors import PolicyError, PolicyMismatchError, UsageError
+from iout_mj.files import write_atomic
 from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
+from iout_mj.runtime import cpu_bounded, usable_cpus
 from iout_mj.scenarios import LAYOUTS, fixed_config
 from iout_mj.schema import ConfigError
 
@@ -77,6 +82,18 @@ def _episode(job: Job) -> dict[str, Any]:
     return row
 
 
+def _pool(workers: int) -> Any:
+    """Worker processes that leave Ctrl-C to this one, which ends them (one message, not a
+    traceback from every worker): they start with SIGINT ignored, and keep it so."""
+    if threading.current_thread() is not threading.main_thread():
+        return mp.get_context("spawn").Pool(workers)  # signals belong to the main thread
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return mp.get_context("spawn").Pool(workers)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _cells(
     policies: list[str],
     n_auvs: list[int],
@@ -98,6 +115,13 @@ def _cells(
         finally:
             env.close()
     return cells, skipped
+
+
+def _once_each(what: str, values: list[Any]) -> None:
+    """Refuse a list that names a value twice (its cell would count the same episodes twice)."""
+    twice = sorted({str(v) for v in values if values.count(v) > 1})
+    if twice:
+        raise UsageError(f"{what} {', '.join(twice)} given more than once: accepted each once")
 
 
 def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -125,6 +149,31 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
+def _run(
+    jobs: list[Job],
+    workers: int,
+    ray_address: str | None,
+    ray_timeout_s: float | None,
+    on_done: Callable[[], Any],
+) -> list[dict[str, Any]]:
+    """Every job's episode row: on Ray, in `workers` processes, or here."""
+    if ray_address is not None:
+        from iout_mj.experiments import ray_jobs  # ray is optional: imported only when asked
+
+        return ray_jobs.run_tasks(_episode, jobs, ray_address, on_done, ray_timeout_s)
+    results = []
+    if workers > 1:
+        with _pool(workers) as pool:
+            for row in pool.imap_unordered(_episode, jobs):
+                results.append(row)
+                on_done()
+    else:
+        for job in jobs:
+            results.append(_episode(job))
+            on_done()
+    return results
+
+
 def evaluate(
     policies: list[str],
     n_auvs: list[int],
@@ -139,16 +188,23 @@ def evaluate(
     layout: str = "paper",
     base: Config | None = None,
     ray_address: str | None = None,
+    ray_timeout_s: float | None = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run every (policy, N, K, episode) a policy can serve; returns (summary rows, episode
     rows). `layout` and `base` (the env config: current, noise, reward, physics; its N and K
     come from the arguments) are as for `scenario_env`. Cells a trained policy cannot serve
     (another N, K or action mapping) are skipped and said in `skipped`. With `ray_address`
-    ("local" or a cluster address) the episodes run as Ray tasks: the same rows."""
+    ("local" or a cluster address, joined within `ray_timeout_s`) the episodes run as Ray
+    tasks: the same rows. `workers` is at most the CPUs this process may use (default: as
+    many as there are CPUs and episodes); a policy, N or K given twice is refused."""
     if episodes < 1:
-        raise ValueError(f"episodes={episodes}: accepted an integer >= 1")
+        raise UsageError(f"episodes={episodes}: accepted an integer >= 1")
     if layout not in LAYOUTS:
         raise ConfigError(f"layout={layout!r} is invalid: accepted one of {LAYOUTS}")
+    for what, values in (("policy", policies), ("N", n_auvs), ("K", nodes)):
+        _once_each(what, list(values))
+    if workers is not None:
+        cpu_bounded(workers, "workers", 1)
     base = base or Config()
     cells, notes = _cells(policies, n_auvs, nodes, layout, base, trust_pickle)
     if skipped is not None:
@@ -159,38 +215,35 @@ def evaluate(
         Job(p, n, k, seed + e, backend, layout, base, e == 0 and k == TRACE_NODES, trust_pickle)
         for (p, n, k), e in product(cells, range(episodes))
     ]
-    workers = workers or min(len(jobs), os.cpu_count() or 1)
-    bar = tqdm(total=len(jobs), desc="episodes", unit="ep", disable=not progress)
-    results = []
-    if ray_address is not None:
-        from iout_mj.experiments import ray_jobs  # ray is optional: imported only when asked
-
-        results = ray_jobs.run_tasks(_episode, jobs, ray_address, lambda: bar.update(1))
-    elif workers > 1:
-        with mp.get_context("spawn").Pool(workers) as pool:
-            for row in pool.imap_unordered(_episode, jobs):
-                results.append(row)
-                bar.update(1)
-    else:
-        for job in jobs:
-            results.append(_episode(job))
-            bar.update(1)
-    bar.close()
+    workers = workers or min(len(jobs), usable_cpus())
+    with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=not progress) as bar:
+        results = _run(jobs, workers, ray_address, ray_timeout_s, lambda: bar.update(1))
     results.sort(key=lambda r: (r["policy"], r["n_auvs"], r["n_nodes"], r["seed"]))
     return summarize(results), results
 
 
 def save(rows: list[dict[str, Any]], episodes: list[dict[str, Any]], out: Path) -> None:
-    """results.json, results.csv, episodes.json and traces.json (one K = 7 episode each)."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps(rows, indent=2) + "\n")
-    with (out / "results.csv").open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    """results.json, results.csv, episodes.json and traces.json (one K = 7 episode each), each
+    replaced whole; a failed write (a full disk, ...) raises `UsageError` naming the file."""
+    table = io.StringIO(newline="")
+    writer = csv.DictWriter(table, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
     traces = {f"{e['policy']}, N={e['n_auvs']}": e.pop("trace") for e in episodes if "trace" in e}
-    (out / "episodes.json").write_text(json.dumps(episodes) + "\n")
-    (out / "traces.json").write_text(json.dumps(traces) + "\n")
+    files = {
+        "results.json": json.dumps(rows, indent=2) + "\n",
+        "results.csv": table.getvalue(),
+        "episodes.json": json.dumps(episodes) + "\n",
+        "traces.json": json.dumps(traces) + "\n",
+    }
+    path = out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for name, text in files.items():
+            path = out / name
+            write_atomic(path, text.encode())
+    except OSError as exc:
+        raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:

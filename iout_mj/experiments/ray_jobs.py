@@ -11,7 +11,8 @@ from __future__ import annotations
 import csv
 import itertools
 import json
-import os
+import socket
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,24 +21,82 @@ import ray
 import yaml
 from ray import tune
 
+from iout_mj.errors import UsageError
+from iout_mj.runtime import usable_cpus
 from iout_mj.schema import ConfigError, build_dataclass, load_mapping
 from iout_mj.training import TrainConfig, train
 
 LOCAL = "local"
+CONNECT_TIMEOUT_S = 30.0
+"""How long `connect` waits for a Ray cluster to answer before it gives up with a message."""
+ADDRESSES = (
+    "'local' (a new instance on this machine), 'auto' (the cluster already started on this "
+    "machine), HOST:PORT (a cluster's GCS, usually port 6379) or ray://HOST:PORT (Ray Client)"
+)
 
 
-def connect(address: str | None) -> None:
-    """Join the Ray cluster at `address`, or start a local instance on loopback (None/local)."""
+def _host_port(address: str) -> tuple[str, int]:
+    """HOST and PORT of HOST:PORT or ray://HOST:PORT; a clear error for anything else."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise UsageError(f"Ray address {address!r} is invalid: accepted {ADDRESSES}")
+    return host.strip("[]"), int(port)
+
+
+def _reachable(address: str, timeout_s: float) -> None:
+    """Fail fast, with a message, where nothing listens at the address."""
+    host, port = _host_port(address)
+    try:
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError as exc:
+        cause = exc.strerror or type(exc).__name__
+        raise UsageError(
+            f"cannot reach a Ray cluster at {address}: {cause} (waited up to {timeout_s:g} s); "
+            f"start one there (ray start --head) or give another address: accepted {ADDRESSES}"
+        ) from None
+
+
+def _init_within(address: str, timeout_s: float) -> None:
+    """`ray.init(address)` that gives up after `timeout_s` (Ray itself retries for ever when a
+    port answers but no Ray cluster does)."""
+    failure: list[BaseException] = []
+
+    def init() -> None:
+        try:
+            ray.init(address=address, include_dashboard=False, log_to_driver=False)
+        except BaseException as exc:  # handed to the caller's thread
+            failure.append(exc)
+
+    thread = threading.Thread(target=init, name="ray-connect", daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    if thread.is_alive():
+        raise UsageError(
+            f"no Ray cluster answered at {address} within {timeout_s:g} s (something listens "
+            f"there, but not Ray's GCS); accepted {ADDRESSES}"
+        )
+    if failure:
+        raise UsageError(f"cannot join the Ray cluster at {address}: {failure[0]}") from None
+
+
+def connect(address: str | None, timeout_s: float | None = None) -> None:
+    """Join the Ray cluster at `address` within `timeout_s` (None: `CONNECT_TIMEOUT_S`), else
+    a `UsageError` naming the address and what is accepted; or start a local instance on
+    loopback (None or "local")."""
     if ray.is_initialized():
         return
-    local = address in (None, "", LOCAL)
-    ray.init(
-        address=None if local else address,
-        num_cpus=os.cpu_count() if local else None,
-        include_dashboard=False,
-        log_to_driver=False,
-        _node_ip_address="127.0.0.1" if local else None,
-    )
+    timeout_s = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
+    if not address or address == LOCAL:
+        ray.init(
+            num_cpus=usable_cpus(),
+            include_dashboard=False,
+            log_to_driver=False,
+            _node_ip_address="127.0.0.1",
+        )
+        return
+    if address != "auto":
+        _reachable(address, timeout_s)
+    _init_within(address, timeout_s)
 
 
 def run_tasks(
@@ -45,9 +104,10 @@ def run_tasks(
     jobs: list[Any],
     address: str | None,
     on_done: Callable[[], Any],
+    timeout_s: float | None = None,
 ) -> list[dict[str, Any]]:
     """`fn(job)` for every job as a Ray task of one CPU; results in completion order."""
-    connect(address)
+    connect(address, timeout_s)
     task = ray.remote(num_cpus=1)(fn)
     pending = [task.remote(job) for job in jobs]
     results = []
@@ -111,13 +171,15 @@ def _trial(param: dict[str, Any]) -> None:
     tune.report({**last, "trial": cfg.name, "num_timesteps": state.num_timesteps})
 
 
-def sweep(path: str | Path, out: Path, address: str | None) -> dict[str, Any]:
+def sweep(
+    path: str | Path, out: Path, address: str | None, timeout_s: float | None = None
+) -> dict[str, Any]:
     """Every trial of a sweep file as a Ray Tune trial; writes `results.csv`, `results.json`
     and `best.yaml` (the best trial's training config) into `out`."""
     spec = load_sweep(path)
     out = out.resolve()  # Tune runs trials in their own working directories
     out.mkdir(parents=True, exist_ok=True)
-    connect(address)
+    connect(address, timeout_s)
     space = [{**t, "out": str(out), "cpus": spec["cpus_per_trial"]} for t in spec["trials"]]
     tuner = tune.Tuner(
         tune.with_resources(_trial, {"cpu": spec["cpus_per_trial"]}),
