@@ -171,16 +171,23 @@ def test_unwritable_output_fails_before_the_work(tmp_path):
         assert time.perf_counter() - start < 20
 
 
-def test_a_diverged_mission_exits_non_zero_with_the_error_once(tmp_path):
+def test_a_current_that_once_diverged_the_physics_is_refused_before_the_mission(tmp_path):
     cfg = tmp_path / "c.yaml"
     cfg.write_text("physics:\n  current_mps: [1.0e9, 0.0]\n")
     out = run(
         "mission", "--config", cfg, "--slots", "3", "--no-video", "--out", tmp_path, check=False
     )
-    assert out.returncode == 3
-    assert out.stderr.count("physics diverged") == 1
-    summary = json.loads((tmp_path / "mission.json").read_text())
-    assert summary["metrics"]["valid"] is False
+    assert out.returncode == 2 and "current_mps" in out.stderr and "accepted" in out.stderr
+    assert not (tmp_path / "mission.json").exists()
+
+
+def test_a_diverged_mission_exits_3_with_the_error_once(capsys):
+    from iout_mj.commands import DIVERGED, _diverged
+
+    error = "physics diverged (MuJoCo reset the state)"
+    assert _diverged({"metrics": {"valid": False, "error": error}}, "mission") == DIVERGED == 3
+    assert capsys.readouterr().err == f"iout-mj mission: error: {error}\n"
+    assert _diverged({"metrics": {"valid": True}}, "mission") == 0
 
 
 def test_evaluate_skips_cells_a_policy_cannot_serve():
