@@ -73,7 +73,8 @@ def test_one_slot_every_term_by_hand():
     assert t["infeasible_uplink"] == 0.0
     assert t["collision"] == 0.0  # 277 m apart, beyond d_th = 100 m
     assert t["docking"] == t["deadline"] == t["undocked_at_end"] == t["aoi_after_mission"] == 0.0
-    assert reward == sum(t[name] for name in REWARD_TERMS)
+    progress = 0.02 * (before - after).sum()
+    assert reward == pytest.approx(progress - 0.1 * 2.0 - 1.0 + margin.sum())  # by hand
     assert m.state.propulsion_energy_j.tolist() == [1000.0 + 40 * 25] * 2  # + hotel load
 
 

@@ -76,7 +76,7 @@ def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):
             progress=False,
             parallel=False,
         )
-    with pytest.raises(FileExistsError, match=r"--resume.*--overwrite"):
+    with pytest.raises(CheckpointError, match=r"--resume.*--overwrite"):
         train(cfg, tmp_path, progress=False, parallel=False)
     resumed = train(cfg, tmp_path, resume=True, progress=False, parallel=False)
     assert resumed.num_timesteps == 256 and len(resumed.history) == len(state.history)
