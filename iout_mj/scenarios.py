@@ -137,24 +137,6 @@ def load_config(config: ConfigLike) -> Config:
     raise ConfigError(f"config={config!r}: accepted a Config, a dict, a file path or None")
 
 
-def resolve_config(
-    config: ConfigLike,
-    n_auvs: int | None = None,
-    n_nodes: int | None = None,
-    layout: str = "paper",
-    layout_seed: int = 0,
-) -> Config:
-    """The env's Config: `config` with N, K and the layout applied (None keeps the config's)."""
-    base = load_config(config)
-    if layout not in LAYOUTS:
-        raise ConfigError(f"layout={layout!r} is invalid: accepted one of {LAYOUTS}")
-    if n_auvs is None and n_nodes is None and layout == "paper":
-        return base
-    n = base.scenario.n_auvs if n_auvs is None else n_auvs
-    k = base.scenario.n_nodes if n_nodes is None else n_nodes
-    return make_config(n, k, layout, seed=layout_seed, base=base)
-
-
 def fixed_config(n_auvs: int, n_nodes: int, base: ConfigLike = None) -> Config:
     """The paper's layout for K = 7 and 13, else the seeded layout `random_layout(K, seed=K)`:
     one fixed layout per K (evaluation, missions, benchmarks)."""

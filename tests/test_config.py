@@ -10,7 +10,7 @@ import pytest
 
 from iout_mj.config import PAPER_LAYOUTS, Config, MotionConfig, RewardWeights
 from iout_mj.experiments.ray_jobs import load_sweep
-from iout_mj.scenarios import fixed_config, make_config, random_layout, resolve_config
+from iout_mj.scenarios import fixed_config, make_config, random_layout, resolve
 from iout_mj.schema import ConfigError, load_mapping
 from iout_mj.training import TrainConfig
 
@@ -125,8 +125,8 @@ def test_reward_weights_carry_their_signs():
 
 
 def test_one_scenario_resolution_for_every_entry_point():
-    assert resolve_config(None, 1, 13).scenario.nodes_m == PAPER_13
-    assert resolve_config(None, 1, 13).scenario.n_auvs == 1
+    assert resolve(None, 1, 13).config.scenario.nodes_m == PAPER_13
+    assert resolve(None, 1, 13).config.scenario.n_auvs == 1
     fixed = fixed_config(2, 5)  # evaluation, mission, bench: one seeded layout per K
     assert_seeded_layout(fixed.scenario.nodes_m, 5)
     base = Config.from_dict({"motion": {"hotel_power_w": 20}})
@@ -139,7 +139,7 @@ def test_one_scenario_resolution_for_every_entry_point():
     assert dataclasses.replace(paper.scenario, nodes_m=PAPER_7) == Config().scenario
     assert fixed_config(1, 9, base).motion.hotel_power_w == 20.0
     with pytest.raises(ConfigError, match="layout='grid'"):
-        resolve_config(None, 2, 7, "grid")
+        resolve(None, 2, 7, "grid")
 
 
 @pytest.mark.parametrize(
