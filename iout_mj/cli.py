@@ -18,13 +18,15 @@ from typing import Any
 # a constant that the tests hold equal to the registry.
 from iout_mj.agents.shipped import shipped_policies
 from iout_mj.backends.registry import SINGLE_ENV_BACKENDS as BACKENDS
-from iout_mj.cli_args import int_at_least, positive_distance, positive_seconds
+from iout_mj.cli_args import int_at_least, int_between, positive_distance, positive_seconds
 from iout_mj.errors import IoutError
 from iout_mj.scenarios import LAYOUTS
 from iout_mj.schema import ConfigError
 
 BASELINES = ("greedy", "round-robin", "random-walk", "planner", "comm-first", "tour-scheduler")
 """The names of `agents.registry.POLICIES`, in its order."""
+MAX_FRAME_PX = (1920, 1080)
+"""The offscreen framebuffer of the scene (`offwidth`, `offheight` of assets/arena.xml)."""
 ERRORS = (IoutError, ConfigError)
 """Bad input, reported as a message and exit 2; any other exception is a bug (a traceback)."""
 INTERRUPTED = 130
@@ -83,9 +85,25 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
     p.add_argument(
         "--slots", type=int_at_least(1), default=None, help="stop after this many 25 s slots"
     )
-    p.add_argument("--width", type=int_at_least(16), default=width, help="frame width, pixels")
-    p.add_argument("--height", type=int_at_least(16), default=height, help="frame height, pixels")
-    p.add_argument("--fps", type=int_at_least(1), default=30, help="video frames per second")
+    frame = "the offscreen framebuffer of the scene"
+    p.add_argument(
+        "--width",
+        type=int_between(16, MAX_FRAME_PX[0], frame),
+        default=width,
+        help=f"frame width, pixels (16 to {MAX_FRAME_PX[0]})",
+    )
+    p.add_argument(
+        "--height",
+        type=int_between(16, MAX_FRAME_PX[1], frame),
+        default=height,
+        help=f"frame height, pixels (16 to {MAX_FRAME_PX[1]})",
+    )
+    p.add_argument(
+        "--fps",
+        type=int_between(1, 240, "a video player's rates"),
+        default=30,
+        help="video frames per second (1 to 240)",
+    )
     p.add_argument("--layout", choices=LAYOUTS, default="paper", help=LAYOUT_HELP)
     p.add_argument("--config", help="YAML/JSON env config (current, noise, reward, physics...)")
     _trust_pickle(p)

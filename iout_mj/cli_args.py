@@ -38,6 +38,20 @@ def int_at_least(low: int) -> Any:
     return parse
 
 
+def int_between(low: int, high: int, what: str) -> Any:
+    """An argparse type: an integer from `low` to `high` (`what` says why that high)."""
+
+    def parse(text: str) -> int:
+        accepted = f"accepted an integer from {low} to {high} ({what})"
+        value = _number(text, int, accepted)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text} is invalid: {accepted}")
+        return int(value)
+
+    parse.__name__ = f"integer from {low} to {high}"
+    return parse
+
+
 def positive_distance(text: str) -> float:
     value = _number(text, float, "a number; accepted a distance > 0 m")
     if value <= 0:

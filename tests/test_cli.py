@@ -351,3 +351,28 @@ def test_evaluate_refuses_repeated_cells_and_more_workers_than_cpus(args, match)
 def test_mission_slots_stop_early_only():
     out = run("mission", "--slots", "56", "--no-video", check=False)
     assert out.returncode == 2 and "accepted 1 to 55" in out.stderr
+
+
+def test_frame_sizes_are_bounded_by_the_scenes_framebuffer():
+    import xml.etree.ElementTree as ET
+
+    from iout_mj.cli import MAX_FRAME_PX
+
+    frame = ET.parse(ROOT / "assets" / "arena.xml").find("visual/global")
+    assert (int(frame.get("offwidth")), int(frame.get("offheight"))) == MAX_FRAME_PX
+    for args, match in (
+        (("mission", "--width", "1921"), "accepted an integer from 16 to 1920"),
+        (("render", "--height", "100000"), "accepted an integer from 16 to 1080"),
+        (("render", "--fps", "0"), "accepted an integer from 1 to 240"),
+    ):
+        out = run(*args, check=False)
+        assert out.returncode == 2 and match in out.stderr, out.stderr
+
+
+def test_an_evaluation_of_more_than_max_episodes_is_refused_before_it_starts():
+    from iout_mj.experiments.evaluate import MAX_EPISODES, evaluate
+
+    start = time.perf_counter()
+    with pytest.raises(UsageError, match=f"= {2 * MAX_EPISODES} episodes: accepted at most"):
+        evaluate(["greedy", "planner"], [1], [7], MAX_EPISODES, 0, "kinematic", progress=False)
+    assert time.perf_counter() - start < 10

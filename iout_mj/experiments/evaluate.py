@@ -35,6 +35,9 @@ from iout_mj.scenarios import LAYOUTS, fixed_config
 from iout_mj.schema import ConfigError
 
 TRACE_NODES = 7
+MAX_EPISODES = 100_000
+"""Episodes of one evaluation at most (cells x episodes; hours of CPU, and their rows in
+memory)."""
 
 
 @dataclass(frozen=True)
@@ -211,6 +214,11 @@ def evaluate(
         skipped.extend(notes)
     if not cells:
         raise PolicyError("no policy can serve any of the asked (N, K): " + "; ".join(notes))
+    if len(cells) * episodes > MAX_EPISODES:
+        raise UsageError(
+            f"{len(cells)} cells x {episodes} episodes = {len(cells) * episodes} episodes: "
+            f"accepted at most {MAX_EPISODES} in one evaluation"
+        )
     jobs = [
         Job(p, n, k, seed + e, backend, layout, base, e == 0 and k == TRACE_NODES, trust_pickle)
         for (p, n, k), e in product(cells, range(episodes))
