@@ -10,8 +10,11 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from iout_mj.backends.kinematic import move
 from iout_mj.envs import ENV_ID, KinematicVecEnv, PhysicsVecEnv
+from iout_mj.envs.gym_vector import MultiAUVVectorEnv
+from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
 from iout_mj.mission import ActionError, Mission
 from iout_mj.mission.rules import unserved_aoi_sum
+from iout_mj.runtime import usable_cpus
 
 
 def docked_start(cfg):
@@ -64,7 +67,7 @@ def test_kinematic_batch_matches_independent_environments(cfg, rng):
 
 def test_physics_batch_on_two_threads_matches_independent_environments(cfg, rng):
     cfg = docked_start(cfg)
-    venv = PhysicsVecEnv(3, config=cfg, nthread=2)
+    venv = PhysicsVecEnv(3, config=cfg, nthread=min(2, usable_cpus()))  # 2 where allowed
     assert_batch_matches_independent_envs(venv, "mujoco", cfg, rng, 70)
     venv.close()
 
@@ -171,10 +174,6 @@ def test_physics_batch_places_each_envs_own_layout_and_current(cfg):
 
 
 def test_threads_are_capped_by_the_cpus_this_process_may_use(cfg):
-    from iout_mj.envs.gym_vector import MultiAUVVectorEnv
-    from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
-    from iout_mj.runtime import usable_cpus
-
     too_many = usable_cpus() + 1
     accepted = rf"nthread={too_many} is invalid: accepted an integer from 0 to {usable_cpus()}"
     for make in (
@@ -189,9 +188,6 @@ def test_threads_are_capped_by_the_cpus_this_process_may_use(cfg):
 
 
 def test_a_closed_vec_env_refuses_to_step_or_reset(cfg):
-    from iout_mj.envs.gym_vector import MultiAUVVectorEnv
-    from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
-
     for venv in (
         PhysicsVecEnv(2, config=cfg),
         KinematicVecEnv(2, config=cfg),
