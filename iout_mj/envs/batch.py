@@ -37,7 +37,7 @@ MT_KEY_WORDS = 624
 def rng_arrays(rng: np.random.RandomState) -> dict[str, np.ndarray]:
     """A RandomState's state as arrays: the MT19937 key, [position, has_gauss] and the
     cached Gaussian (`set_rng` puts it back)."""
-    _, key, pos, has_gauss, cached = rng.get_state()  # type: ignore[misc]
+    _, key, pos, has_gauss, cached = rng.get_state()
     return {
         "key": np.array(key, dtype=np.uint32),
         "pos": np.array([pos, has_gauss], dtype=np.int64),

@@ -3,9 +3,18 @@
 A run folder holds `config.yaml` (the exact training config), `last/` and `best/` (policy
 folders, `agents.policy_format`, whose manifests also hold the run state, so a checkpoint is
 self-describing), `state.json` (a copy of the last run state, for people and figures) and
-TensorBoard logs under `tb/`. A training checkpoint adds the optimizer state and every RNG
-(torch, numpy's global one that SB3's minibatches draw from, the environments' batch RNG) to
-the weights file, so `--resume` continues the schedule, the statistics and the random streams.
+TensorBoard logs under `tb/`. A training checkpoint adds the optimizer state and the global
+RNGs (torch, numpy's that SB3's minibatches draw from, python's) to the weights file, so
+`--resume` continues the schedule, the statistics and the random streams. A checkpoint taken
+inside a phase (`live`) also holds the running episodes: the environments' whole state
+(`MissionVecEnv.state_arrays`: mission, nodes, log, their RNGs, MuJoCo scenes and energy
+meters), the per-environment discounted returns of the reward normalisation, the monitor's
+episode counters, and SB3's last observation and episode starts. A run killed at any moment
+and resumed from its last checkpoint thus equals the uninterrupted run bit for bit (a new
+phase's environments start from their seed, as in the uninterrupted run). These arrays are
+stored as their raw bits (floats and unsigned integers as signed integers of the same size):
+exact, and the environments' state legitimately holds infinities (no separation measured yet)
+that the weights file's finiteness check refuses in float tensors.
 
 Every file of a checkpoint is covered by a checksum (`policy_format`): an edited run state is
 refused on resume with the file's name, not trained on. A write is whole or not at all; a
@@ -28,6 +37,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from stable_baselines3.common.vec_env import VecMonitor, unwrap_vec_wrapper
 
 from iout_mj.agents.policy_format import (
     build_policy,
@@ -96,61 +106,104 @@ def read_run_state(folder: Path, cfg: TrainConfig) -> RunState:
         raise CheckpointError(f"cannot resume from {folder}: {exc}") from exc
 
 
-def _rng_tensors(batch_rng: np.random.RandomState) -> tuple[dict[str, torch.Tensor], Any]:
-    """Every RNG state: tensors for the weights file, the rest as JSON."""
+def _rng_tensors() -> tuple[dict[str, torch.Tensor], Any]:
+    """The global RNGs' states: tensors for the weights file, the rest as JSON."""
     global_state: Any = np.random.get_state()
-    env_state: Any = batch_rng.get_state()
     np_key, np_pos, np_gauss, np_cached = global_state[1:]
-    env_key, env_pos, env_gauss, env_cached = env_state[1:]
     tensors = {
         "rng.torch": torch.get_rng_state(),
         "rng.numpy_key": torch.from_numpy(np.asarray(np_key, dtype=np.int64)),
-        "rng.env_key": torch.from_numpy(np.asarray(env_key, dtype=np.int64)),
     }
     scalars = {
         "numpy": [int(np_pos), int(np_gauss), float(np_cached)],
-        "env": [int(env_pos), int(env_gauss), float(env_cached)],
         "python": repr(random.getstate()),
     }
     return tensors, scalars
 
 
-def _restore_rngs(
-    tensors: dict[str, torch.Tensor], scalars: dict[str, Any]
-) -> np.random.RandomState:
+def _restore_rngs(tensors: dict[str, torch.Tensor], scalars: dict[str, Any]) -> None:
     torch.set_rng_state(tensors["rng.torch"])
     pos, gauss, cached = scalars["numpy"]
     key = tensors["rng.numpy_key"].numpy().astype(np.uint32)
     np.random.set_state(("MT19937", key, pos, gauss, cached))
-    env = np.random.RandomState()
-    pos, gauss, cached = scalars["env"]
-    env.set_state(("MT19937", tensors["rng.env_key"].numpy().astype(np.uint32), pos, gauss, cached))
-    return env
+
+
+def _bits(array: np.ndarray) -> torch.Tensor:
+    """An array as a tensor of its raw bits (floats and unsigned integers as signed integers
+    of the same size)."""
+    a = np.ascontiguousarray(array)
+    if a.dtype.kind in "fu":
+        a = a.view(np.dtype(f"i{a.itemsize}"))
+    return torch.from_numpy(a.copy())
+
+
+def _unbits(tensor: torch.Tensor, like: np.ndarray) -> np.ndarray:
+    """The array of `_bits`, as the dtype of `like` (a mismatch is left for the caller's
+    shape and dtype check)."""
+    a = tensor.numpy()
+    if like.dtype.kind in "fu" and a.dtype == np.dtype(f"i{like.dtype.itemsize}"):
+        a = a.view(like.dtype)
+    return a
+
+
+def _monitor(venv: Any) -> VecMonitor:
+    """The VecMonitor under the trainer's VecNormalize."""
+    monitor = unwrap_vec_wrapper(venv, VecMonitor)
+    assert isinstance(monitor, VecMonitor), "the trainer's environments are monitored"
+    return monitor
+
+
+def _live_tensors(model: Any) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    """The running episodes (see the module's docstring): tensors, and the rest as JSON."""
+    venv = model.get_vec_normalize_env()
+    monitor = _monitor(venv)
+    tensors = {f"env.{k}": _bits(v) for k, v in venv.unwrapped.state_arrays().items()}
+    tensors.update(
+        {
+            "run.last_obs": _bits(model._last_obs),
+            "run.episode_starts": _bits(model._last_episode_starts),
+            "run.original_obs": _bits(venv.old_obs),
+            "run.returns": _bits(venv.returns),
+            "run.monitor_returns": _bits(monitor.episode_returns),
+            "run.monitor_lengths": _bits(monitor.episode_lengths),
+        }
+    )
+    return tensors, {"monitor_episode_count": int(monitor.episode_count)}
 
 
 def save_checkpoint(
-    model: Any, folder: Path, cfg: TrainConfig, state: RunState, extra: dict[str, Any]
+    model: Any,
+    folder: Path,
+    cfg: TrainConfig,
+    state: RunState,
+    extra: dict[str, Any],
+    live: bool = False,
 ) -> None:
-    """Policy, normalisation, optimizer, RNGs and run state into `folder`, atomically; a
-    disk-full or read-only fault raises `CheckpointError` and keeps the previous one."""
+    """Policy, normalisation, optimizer, RNGs and run state into `folder`, atomically, and
+    with `live` (a checkpoint inside a phase, the environments started) the running episodes;
+    a disk-full or read-only fault raises `CheckpointError` and keeps the previous one."""
     venv = model.get_vec_normalize_env()
-    batch = venv.unwrapped
     opt = model.policy.optimizer.state_dict()
     tensors = {
         f"optimizer.state.{i}.{k}": v for i, entry in opt["state"].items() for k, v in entry.items()
     }
-    rng_tensors, rng_scalars = _rng_tensors(batch.random)
+    rng_tensors, rng_scalars = _rng_tensors()
     tensors.update(rng_tensors)
+    live_scalars = None
+    if live:
+        live_tensors, live_scalars = _live_tensors(model)
+        tensors.update(live_tensors)
     manifest = {
         "n_auvs": cfg.env_spec.n_auvs,
         "n_nodes": cfg.env_spec.n_nodes,
-        "env_config": batch.cfg.to_dict(),
+        "env_config": venv.unwrapped.cfg.to_dict(),
         "training_config": cfg.to_dict(),
         "run_state": asdict(state),
         "num_timesteps": int(model.num_timesteps),
         "n_updates": int(model._n_updates),
         "optimizer_param_groups": opt["param_groups"],
         "rng": rng_scalars,
+        "live": live_scalars,
         **extra,
     }
     try:
@@ -191,15 +244,17 @@ def recover(folder: Path) -> None:
 
 @dataclass
 class Resumed:
-    """What a checkpoint restores into a fresh PPO."""
+    """What a checkpoint restored into a fresh PPO."""
 
     state: RunState
-    env_rng: np.random.RandomState
+    live: bool
+    """The running episodes were restored too (a checkpoint inside a phase)."""
 
 
 def restore(model: Any, folder: Path) -> Resumed:
-    """Load a checkpoint into `model` (built by the trainer with the same config): weights,
-    optimizer, step counts, normalisation statistics and every RNG.
+    """Load a checkpoint into `model` (built by the trainer with the same config, on the
+    environments of the checkpoint's phase): weights, optimizer, step counts, normalisation
+    statistics, every RNG and, for a checkpoint inside a phase, the running episodes.
 
     Raises:
         CheckpointError: a file is missing, unsafe or damaged, or the checkpoint does not fit
@@ -253,12 +308,50 @@ def _restore(
     venv.obs_rms.count = norm["obs_count"]
     venv.ret_rms.mean, venv.ret_rms.var = np.float64(norm["ret_mean"]), np.float64(norm["ret_var"])
     venv.ret_rms.count = norm["ret_count"]
-    env_rng = _restore_rngs(tensors, manifest["rng"])
+    _restore_rngs(tensors, manifest["rng"])
     random.setstate(python_rng)
-    return Resumed(state, env_rng)
+    live = manifest["live"]
+    if live is not None:
+        _restore_live(model, tensors, live)
+    return Resumed(state, live is not None)
 
 
-TRAINING_ONLY = ("run_state", "num_timesteps", "n_updates", "optimizer_param_groups", "rng")
+def _restore_live(model: Any, tensors: dict[str, torch.Tensor], scalars: dict[str, Any]) -> None:
+    """Put back the running episodes of `_live_tensors` (shapes and dtypes checked)."""
+    venv = model.get_vec_normalize_env()
+    monitor = _monitor(venv)
+    envs = venv.unwrapped
+    like = envs.state_arrays()
+    saved = {k[len("env.") :]: v for k, v in tensors.items() if k.startswith("env.")}
+    envs.load_state_arrays(
+        {k: _unbits(v, like[k]) if k in like else v.numpy() for k, v in saved.items()}
+    )
+    n, obs_shape = envs.num_envs, envs.observation_space.shape
+    run = {
+        "last_obs": np.zeros((n, *obs_shape), np.float32),
+        "episode_starts": np.zeros(n, bool),
+        "original_obs": np.zeros((n, *obs_shape), np.float32),
+        "returns": np.zeros(n, np.float64),
+        "monitor_returns": np.zeros(n, np.float32),
+        "monitor_lengths": np.zeros(n, np.int32),
+    }
+    for name, template in run.items():
+        value = _unbits(tensors[f"run.{name}"], template)
+        if value.shape != template.shape or value.dtype != template.dtype:
+            raise ValueError(
+                f"run.{name} is {value.dtype}{list(value.shape)}; accepted "
+                f"{template.dtype}{list(template.shape)}"
+            )
+        run[name] = value.copy()
+    model._last_obs, model._last_episode_starts = run["last_obs"], run["episode_starts"]
+    venv.old_obs, venv.returns = run["original_obs"], run["returns"]
+    model._last_original_obs = venv.get_original_obs()
+    monitor.episode_returns = run["monitor_returns"]
+    monitor.episode_lengths = run["monitor_lengths"]
+    monitor.episode_count = _count(scalars["monitor_episode_count"], "live.monitor_episode_count")
+
+
+TRAINING_ONLY = ("run_state", "num_timesteps", "n_updates", "optimizer_param_groups", "rng", "live")
 """Manifest entries a checkpoint needs for --resume and a shipped policy does not."""
 
 

@@ -24,7 +24,6 @@ from iout_mj.agents.policy_format import (
     MANIFEST,
     LoadedPolicy,
     Normalizer,
-    read_manifest,
     write_atomic,
 )
 from iout_mj.agents.rollout import run_episode
@@ -276,7 +275,9 @@ def train(
         if score > state.best_score:
             state.best_score = score
             save_checkpoint(model, out / "best", cfg, state, extra)
-        save_checkpoint(model, out / "last", cfg, state, extra)
+        # inside a phase whose environments run, --resume continues their episodes
+        live = state.phase == index and model._last_obs is not None
+        save_checkpoint(model, out / "last", cfg, state, extra, live)
         state.save(out / "state.json")
 
     for index in range(state.phase, len(cfg.phases)):
@@ -289,14 +290,12 @@ def train(
             warm_start(model, cfg, progress)
             checkpoint(model)
         if resume and resumed is None:
-            resumed = restore(model, out / "last")
-            mid_phase = read_manifest(out / "last").get("env_phase") == index
-            # the batch continues its stream mid-phase; a new phase starts it from its seed,
-            # as an uninterrupted run does (PPO's constructor must not reseed it)
-            seed = cfg.seed * 1000 + index * 100
-            venv.unwrapped.set_random_state(
-                resumed.env_rng if mid_phase else np.random.RandomState(seed)
-            )
+            resumed = restore(model, out / "last")  # mid-phase: the running episodes too
+            if not resumed.live and index > 0:
+                # a later phase's environments start from their seed, as in an uninterrupted
+                # run (PPO's constructor must not reseed them)
+                seed = cfg.seed * 1000 + index * 100
+                venv.unwrapped.set_random_state(np.random.RandomState(seed))
         if phase_end - model.num_timesteps > 0:
             callbacks = [
                 MissionLoggerCallback(model.num_timesteps),
