@@ -23,6 +23,7 @@ from iout_mj.config import Config
 from iout_mj.envs import KinematicVecEnv, PhysicsVecEnv
 from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
 from iout_mj.training import PhaseConfig, TrainConfig, train
+from iout_mj.training.config import ImitationConfig
 
 N_ENVS, N_STEPS = 4, 32
 ROLLOUT = N_ENVS * N_STEPS
@@ -47,15 +48,45 @@ def config() -> TrainConfig:
     )
 
 
-@pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, TrainConfig, Path]:
+def general_config() -> TrainConfig:
+    """A general (token) policy on 4 scenario cells, warm-started by DAgger."""
+    return TrainConfig(
+        name="kill-general",
+        n_auvs=1,
+        policy="tokens",
+        node_range=(3, 4),
+        width=8,
+        n_envs=1,
+        n_steps=N_STEPS,
+        batch_size=64,
+        n_epochs=1,
+        eval_every_steps=ROLLOUT,
+        eval_episodes=1,
+        imitation=ImitationConfig(episodes=2, epochs=1, rounds=1, round_episodes=1, round_epochs=1),
+        phases=(PhaseConfig("kinematic", PHASE), PhaseConfig("kinematic", 2 * ROLLOUT)),
+        seed=1,  # PPO's seed (1) then differs from the first phase's environments' (1000)
+    )
+
+
+def _uninterrupted(root: Path, cfg: TrainConfig) -> tuple[Path, TrainConfig, Path]:
     """The config file, the config as the killed runs read it, and the uninterrupted run."""
-    root = tmp_path_factory.mktemp("resume")
     path = root / "config.yaml"
-    path.write_text(yaml.safe_dump(config().to_dict()))
+    path.write_text(yaml.safe_dump(cfg.to_dict()))
     cfg = TrainConfig.load(path)  # (its manifests then hold the numbers as the file has them)
     train(cfg, root / "whole", progress=False, parallel=False)
     return path, cfg, root / "whole"
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, TrainConfig, Path]:
+    return _uninterrupted(tmp_path_factory.mktemp("resume"), config())
+
+
+@pytest.fixture(scope="module")
+def uninterrupted_general(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[Path, TrainConfig, Path]:
+    return _uninterrupted(tmp_path_factory.mktemp("resume-general"), general_config())
 
 
 def _state(run: Path) -> dict:
@@ -104,7 +135,7 @@ def assert_same_checkpoint(folder: Path, expected: Path) -> None:
 
 def resume_and_compare(cfg: TrainConfig, run: Path, whole: Path) -> None:
     resumed = train(cfg, run, resume=True, progress=False, parallel=False)
-    assert resumed.num_timesteps == 2 * PHASE and resumed.phase == 2
+    assert resumed.num_timesteps == cfg.total_timesteps and resumed.phase == 2
     assert _state(run) == _state(whole)  # the evaluation history and best score, exactly
     for folder in ("last", "best"):
         assert_same_checkpoint(run / folder, whole / folder)
@@ -160,6 +191,24 @@ def test_killed_inside_a_checkpoint_write(uninterrupted, tmp_path):
     assert any(os.path.lexists(run / name) for name in ("last.tmp", "last.old")), (
         "the kill landed after the write"
     )
+    resume_and_compare(cfg, run, whole)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("steps", "live"),
+    [(0, False), (2 * ROLLOUT, True)],
+    ids=["after-the-warm-start", "mid-phase"],
+)
+def test_a_general_policy_killed_and_resumed(uninterrupted_general, tmp_path, steps, live):
+    """Token policy on scenario cells: killed after the checkpoint of the DAgger warm start
+    (the environments not started yet), or mid-phase (every cell's episodes and streams
+    running)."""
+    path, cfg, whole = uninterrupted_general
+    run = tmp_path / "run"
+    train_and_kill(path, run, lambda r: _state(r).get("num_timesteps") == steps)
+    last = read_manifest(run / "last")
+    assert last["num_timesteps"] == steps and (last["live"] is not None) == live, "killed too late"
     resume_and_compare(cfg, run, whole)
 
 
