@@ -76,7 +76,7 @@ def _init_within(address: str, timeout_s: float) -> None:
             f"there, but not Ray's GCS); accepted {ADDRESSES}"
         )
     if failure:
-        raise UsageError(f"cannot join the Ray cluster at {address}: {failure[0]}") from None
+        raise UsageError(f"cannot join the Ray cluster at {address}: {failure[0]}") from failure[0]
 
 
 def connect(address: str | None, timeout_s: float | None = None) -> None:
