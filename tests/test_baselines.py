@@ -1,6 +1,7 @@
 """Baselines and the evaluation harness."""
 
 import dataclasses
+import hashlib
 import json
 
 import gymnasium as gym
@@ -98,6 +99,10 @@ def test_bad_policy_names_and_files(tmp_path, cli):
     bad = tmp_path / "policy"
     bad.mkdir()
     (bad / "policy.json").write_text("not json")
+    with pytest.raises(ValueError, match=r"cannot load policy .*policy.json.sha256 is missing"):
+        load_policy(str(bad), env)
+    digest = hashlib.sha256(b"not json").hexdigest()
+    (bad / "policy.json.sha256").write_text(f"{digest}  policy.json\n")  # sealed, still not JSON
     with pytest.raises(ValueError, match=r"cannot load policy .*not valid JSON"):
         load_policy(str(bad), env)
     with pytest.raises(ValueError, match="holds no policy"):
