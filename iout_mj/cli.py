@@ -34,7 +34,12 @@ INTERRUPTED = 130
 
 LAYOUT_HELP = (
     "paper: the paper's nodes for K = 7 and 13, one seeded layout per K otherwise; random: a new "
-    "layout every episode, drawn from the episode's seed"
+    "layout every episode, drawn from the episode's seed (default: the config's own nodes if it "
+    "sets scenario.nodes_m, or --nodes-file's, in every episode; else paper)"
+)
+NODES_FILE_HELP = (
+    "CSV of your nodes, one 'x, y' per row in metres (a header row is allowed): flown in every "
+    "episode"
 )
 
 
@@ -104,8 +109,13 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
         default=30,
         help="video frames per second (1 to 240)",
     )
-    p.add_argument("--layout", choices=LAYOUTS, default="paper", help=LAYOUT_HELP)
-    p.add_argument("--config", help="YAML/JSON env config (current, noise, reward, physics...)")
+    p.add_argument("--layout", choices=LAYOUTS, default=None, help=LAYOUT_HELP)
+    p.add_argument("--nodes-file", help=NODES_FILE_HELP)
+    p.add_argument(
+        "--config",
+        help="YAML/JSON env config (nodes, N, current, noise, reward, physics...); a flag that "
+        "contradicts what it sets is an error",
+    )
     _trust_pickle(p)
 
 
@@ -152,14 +162,22 @@ def build_parser() -> argparse.ArgumentParser:
         default=list(BASELINES),
         help=_policy_help() + "; cells a trained policy cannot serve are skipped",
     )
-    p.add_argument("--n-auvs", type=int_at_least(1), nargs="+", default=[1, 2], help="AUVs N")
+    p.add_argument(
+        "--n-auvs",
+        type=int_at_least(1),
+        nargs="+",
+        default=None,
+        help="AUVs N (default: the config's N if it sets one, else 1 2)",
+    )
     p.add_argument(
         "--nodes",
         type=int_at_least(2),
         nargs="+",
-        default=[7],
-        help="nodes K: the paper's layout for 7 and 13, else one seeded layout per K",
+        default=None,
+        help="nodes K: the paper's layout for 7 and 13, else one seeded layout per K (default: "
+        "the config's or --nodes-file's own nodes, else 7)",
     )
+    p.add_argument("--nodes-file", help=NODES_FILE_HELP)
     p.add_argument("--episodes", type=int_at_least(1), default=20, help="episodes per cell")
     p.add_argument("--seed", type=int_at_least(0), default=0, help="episode e uses seed S + e")
     p.add_argument("--backend", choices=BACKENDS, default="mujoco", help="how vehicles move")
@@ -169,11 +187,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="processes, at most one per CPU (default: one per CPU)",
     )
-    p.add_argument("--layout", choices=LAYOUTS, default="paper", help=LAYOUT_HELP)
+    p.add_argument("--layout", choices=LAYOUTS, default=None, help=LAYOUT_HELP)
     p.add_argument(
         "--config",
-        help="YAML/JSON env config (current, noise, reward, physics); N and K come "
-        "from --n-auvs and --nodes",
+        help="YAML/JSON env config (current, noise, reward, physics, and your own nodes or N, "
+        "kept in every episode); a flag that contradicts what it sets is an error",
     )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     p.add_argument("--out", help="folder for results.csv / results.json / traces.json")
@@ -222,12 +240,18 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_at_least(0),
         help="training seed instead of the config's (default run folder runs/<name>-seed<S>)",
     )
+    p.add_argument("--layout", choices=LAYOUTS, help="node layout instead of the config's")
+    p.add_argument("--n-auvs", type=int_at_least(1), help="AUVs N instead of the config's")
+    p.add_argument("--nodes", type=int_at_least(2), help="nodes K instead of the config's")
+    p.add_argument("--nodes-file", help=NODES_FILE_HELP + ", instead of the config's nodes")
     p.add_argument(
-        "--layout", choices=LAYOUTS, help="node layout instead of the config's (paper: K 7, 13)"
+        "--steps",
+        type=int_at_least(1),
+        help="total PPO steps instead of the config's (its phases scaled to them)",
     )
     p.add_argument(
         "--env-config",
-        help="YAML/JSON env config instead of the config's env: (current, noise, reward, ...)",
+        help="YAML/JSON env config instead of the config's env: (nodes, current, noise, ...)",
     )
     p.set_defaults(func="cmd_train")
 

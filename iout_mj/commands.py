@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from iout_mj.cli_args import evaluation_config, scenario_from_flags, writable_dir
+from iout_mj.cli_args import writable_dir
 from iout_mj.errors import UsageError
 from iout_mj.files import write_atomic
 from iout_mj.runtime import output_lock
-from iout_mj.scenarios import fixed_config, load_config
+from iout_mj.scenarios import fixed_config, load_config, resolve
 from iout_mj.world import acoustics
 
 DIVERGED = 3
@@ -89,8 +89,10 @@ def cmd_validate_energy(args: argparse.Namespace) -> int:
 def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) -> dict[str, Any]:
     from iout_mj.experiments.mission import run_mission  # heavy: see the module docstring
 
-    cfg = scenario_from_flags(args.config, args.n_auvs, args.nodes, args.layout)
-    horizon = cfg.scenario.horizon_slots
+    spec = resolve(
+        args.config, args.n_auvs, args.nodes, args.layout, args.backend, args.nodes_file, flags=True
+    )
+    horizon = spec.config.scenario.horizon_slots
     if args.slots is not None and args.slots > horizon:
         raise UsageError(
             f"--slots {args.slots} is more than the mission's {horizon} slots: accepted 1 to "
@@ -99,8 +101,7 @@ def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) ->
     with output_lock(writable_dir(out), args.command):
         return run_mission(
             policy=args.policy,
-            config=cfg,
-            layout=args.layout,
+            config=spec,
             backend=args.backend,
             seed=args.seed,
             out=out,
@@ -147,7 +148,6 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace, out: Path | None) -> int:
     from iout_mj.experiments import evaluate  # heavy: see the module docstring
 
-    base = evaluation_config(args.config)
     skipped: list[str] = []
     rows, episodes = evaluate.evaluate(
         args.policy,
@@ -160,9 +160,10 @@ def _evaluate(args: argparse.Namespace, out: Path | None) -> int:
         trust_pickle=args.trust_pickle,
         skipped=skipped,
         layout=args.layout,
-        base=base,
+        base=args.config,
         ray_address=args.ray,
         ray_timeout_s=args.ray_timeout,
+        nodes_file=args.nodes_file,
     )
     for note in skipped:
         print(note, file=sys.stderr)
@@ -199,11 +200,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = TrainConfig.load(args.config)
     name = cfg.name
     if args.seed is not None:
-        cfg, name = dataclasses.replace(cfg, seed=args.seed), f"{cfg.name}-seed{args.seed}"
-    if args.layout is not None:
-        cfg = dataclasses.replace(cfg, layout=args.layout)
-    if args.env_config is not None:
-        cfg = dataclasses.replace(cfg, env=load_config(args.env_config))
+        name = f"{cfg.name}-seed{args.seed}"
+    cfg = train_overrides(cfg, args)
     out = writable_dir(Path(args.out or f"runs/{name}"))
     with output_lock(out, "train"):
         state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
@@ -214,6 +212,32 @@ def cmd_train(args: argparse.Namespace) -> int:
     }
     print(json.dumps(summary, indent=2))
     return 0
+
+
+def train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
+    """The training config with the command line's overrides applied, then checked as a whole
+    (N, K and the nodes resolve as for any env: a contradiction names both)."""
+    from iout_mj.scenarios import read_nodes
+
+    changes: dict[str, Any] = {}
+    env = load_config(args.env_config) if args.env_config is not None else cfg.env
+    if args.nodes_file is not None:
+        scenario = dataclasses.replace(env.scenario, nodes_m=read_nodes(args.nodes_file))
+        env = env.replace(scenario=scenario)
+        changes["n_nodes"] = None
+    for flag, field in (("seed", "seed"), ("layout", "layout"), ("n_auvs", "n_auvs")):
+        if getattr(args, flag) is not None:
+            changes[field] = getattr(args, flag)
+    if args.nodes is not None:
+        changes["n_nodes"] = args.nodes
+    if args.steps is not None:
+        total = cfg.total_timesteps
+        phases = [
+            dataclasses.replace(p, timesteps=max(1, round(p.timesteps * args.steps / total)))
+            for p in cfg.phases
+        ]
+        changes["phases"] = tuple(phases)
+    return dataclasses.replace(cfg, env=env, **changes)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:

@@ -167,6 +167,13 @@ class EnvSpec:
         return self.layout == "random"
 
 
+def given_keys(config: ConfigLike) -> set[str]:
+    """The scenario keys (`n_auvs`, `nodes_m`, ...) a config sets itself."""
+    if isinstance(config, EnvSpec):
+        return {"n_auvs", "nodes_m"}
+    return _given(config)[1]
+
+
 def _given(config: ConfigLike) -> tuple[Config, set[str]]:
     """The config and the scenario keys its source sets itself (a Config object: those that
     differ from the defaults)."""
@@ -229,6 +236,7 @@ def resolve(
     layout: str | None = None,
     backend: str = "kinematic",
     nodes: NodesLike = None,
+    flags: bool = False,
 ) -> EnvSpec:
     """The one scenario resolution: the env a caller asks for, checked.
 
@@ -241,7 +249,13 @@ def resolve(
             them, else "paper". Asking for a layout when the nodes are given is an error.
         backend: a registered backend (`iout_mj.backends.registry.BACKENDS`).
         nodes: explicit nodes (a sequence or a CSV file), instead of the config's.
+        flags: name the keywords as the command line's flags in errors (`--nodes 7`).
     """
+
+    def named(key: str, value: Any) -> str:
+        flag = {"n_auvs": "--n-auvs", "n_nodes": "--nodes", "layout": "--layout"}[key]
+        return f"{flag} {value}" if flags else f"{key}={value!r}"
+
     if backend not in BACKENDS:
         raise ConfigError(f"backend={backend!r} is invalid: accepted one of {tuple(BACKENDS)}")
     if layout is not None and layout not in LAYOUTS:
@@ -259,7 +273,7 @@ def resolve(
     base, sets = _given(config)
     own = read_nodes(nodes)
     where = (
-        "nodes"
+        (f"nodes file {nodes}" if isinstance(nodes, (str, Path)) else "nodes=")
         if own is not None
         else f"config {config}"
         if isinstance(config, (str, Path))
@@ -273,20 +287,21 @@ def resolve(
         )
     if n_auvs is not None and "n_auvs" in sets and n_auvs != base.scenario.n_auvs:
         raise ConfigError(
-            f"n_auvs={n_auvs} contradicts {where}, which sets n_auvs={base.scenario.n_auvs}: "
+            f"{named('n_auvs', n_auvs)} contradicts {where}, which sets n_auvs="
+            f"{base.scenario.n_auvs}: "
             "give one or the other"
         )
     n = base.scenario.n_auvs if n_auvs is None else n_auvs
     if own is not None:
         if n_nodes is not None and n_nodes != len(own):
             raise ConfigError(
-                f"n_nodes={n_nodes} contradicts {where}, which sets {len(own)} nodes: give one "
-                "or the other"
+                f"{named('n_nodes', n_nodes)} contradicts {where}, which sets {len(own)} "
+                "nodes: give one or the other"
             )
         if layout is not None:
             raise ConfigError(
-                f"layout={layout!r} contradicts {where}, which sets its own {len(own)} nodes: "
-                "leave the layout out to fly them"
+                f"{named('layout', layout)} contradicts {where}, which sets its own "
+                f"{len(own)} nodes: leave the layout out to fly them"
             )
         scenario = dataclasses.replace(base.scenario, n_auvs=n, nodes_m=own)
         return EnvSpec(base.replace(scenario=scenario), "custom", backend)

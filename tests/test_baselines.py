@@ -151,10 +151,11 @@ def test_tour_scheduler_beats_the_planner_and_docks(n):
 
 def test_random_layouts_are_the_same_for_every_policy_and_differ_by_episode(tmp_path):
     from iout_mj.experiments.evaluate import scenario_env
+    from iout_mj.scenarios import resolve
 
     layouts = []
     for _ in range(2):  # two policies' envs, episode seeds 5 and 6
-        env = scenario_env(2, 9, "kinematic", "random", Config())
+        env = scenario_env(resolve(Config(), 2, 9, "random", "kinematic"))
         layouts.append(
             [env.reset(seed=s) and env.unwrapped.mission.network.nodes_m.copy() for s in (5, 6)]
         )
@@ -186,5 +187,8 @@ def test_evaluate_takes_any_env_config(tmp_path, cli):
     assert quiet["delivered_bits"] > flat["delivered_bits"]  # 19 dB less noise: more uplinks
     nodes = tmp_path / "nodes.yaml"
     nodes.write_text("scenario:\n  nodes_m: [[100, 100], [900, 900]]\n")
-    bad = cli(*args, "--config", nodes, check=False)
-    assert bad.returncode == 2 and "takes N and K from --n-auvs" in bad.stderr
+    own = json.loads(cli(*args, "--config", nodes).stdout)[0]  # the file's nodes, every episode
+    assert (own["n_nodes"], own["layout"], own["episodes"]) == (2, "custom", 2)
+    bad = cli(*args, "--config", nodes, "--nodes", "7", check=False)
+    assert bad.returncode == 2 and "--nodes 7 contradicts config" in bad.stderr
+    assert "which sets 2 nodes" in bad.stderr

@@ -1,9 +1,12 @@
 """One scenario resolution (`scenarios.resolve`): a config's own nodes are kept by every
 entry point, contradictions name both sides, nodes come from lists or CSV files."""
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import iout_mj
 from iout_mj.backends.registry import BACKENDS
@@ -119,3 +122,70 @@ def test_the_backend_registry_is_what_every_entry_point_accepts():
         resolve(backend="jax")
     with pytest.raises(ValueError, match=r"warp steps batches"):
         gym.make(ENV_ID, backend="warp")
+
+
+@pytest.mark.slow
+def test_your_own_network_end_to_end_from_a_csv(tmp_path, cli):
+    """The README's walkthrough, shortened: a CSV of nodes to a trained policy, an evaluation
+    on those nodes and a mission video of them."""
+    nodes = tmp_path / "nodes.csv"
+    nodes.write_text("x_m, y_m\n" + "\n".join(f"{x}, {y}" for x, y in NODES) + "\n")
+    run = tmp_path / "run"
+    cli(
+        "train",
+        "--config",
+        "training/configs/smoke.yaml",
+        "--nodes-file",
+        nodes,
+        "--n-auvs",
+        "2",
+        "--steps",
+        "128",
+        "--out",
+        run,
+        cwd=ROOT,
+    )
+    saved = TrainConfig.load(run / "config.yaml")  # what the run trained on
+    assert saved.env_spec.n_auvs == 2 and saved.env_spec.config.scenario.nodes_m == tuple(NODES)
+    out = cli(
+        "evaluate",
+        "--policy",
+        run / "best",
+        "greedy",
+        "--nodes-file",
+        nodes,
+        "--n-auvs",
+        "2",
+        "--episodes",
+        "2",
+        "--backend",
+        "kinematic",
+        "--json",
+        "--out",
+        tmp_path / "eval",
+    )
+    rows = json.loads(out.stdout)
+    assert {(r["n_nodes"], r["layout"]) for r in rows} == {(5, "custom")} and len(rows) == 2
+    cli("figures", "--results", tmp_path / "eval", "--out", tmp_path / "fig")
+    assert list((tmp_path / "fig").glob("*.png"))
+    mission = cli(
+        "mission",
+        "--policy",
+        run / "best",
+        "--nodes-file",
+        nodes,
+        "--n-auvs",
+        "2",
+        "--backend",
+        "kinematic",
+        "--slots",
+        "3",
+        "--width",
+        "320",
+        "--height",
+        "180",
+        "--out",
+        tmp_path / "mission",
+    )
+    assert json.loads(mission.stdout)["n_nodes"] == 5
+    assert (tmp_path / "mission" / "mission.mp4").stat().st_size > 0

@@ -1,13 +1,15 @@
 """Seeded evaluation of policies over (N, K) grids, in parallel worker processes.
 
 Episode e of every (policy, N, K) uses seed S + e, so every policy starts from the same states.
-The layout of (N, K) is `scenarios.fixed_config`: the paper's for K = 7 and 13, else one
-seeded layout per K, the same for every policy and episode.
+Every cell is resolved like any env (`scenarios.resolve`): "paper" is the paper's layout for
+K = 7 and 13 and one seeded layout per K otherwise, "random" a new layout every episode (the
+same for every policy), and a config's own nodes (or a nodes file) are flown in every episode.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import multiprocessing as mp
@@ -25,14 +27,12 @@ from tqdm import tqdm
 
 from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
-from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
 from iout_mj.errors import PolicyError, PolicyMismatchError, UsageError
 from iout_mj.files import write_atomic
 from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
 from iout_mj.runtime import cpu_bounded, usable_cpus
-from iout_mj.scenarios import LAYOUTS, fixed_config
-from iout_mj.schema import ConfigError
+from iout_mj.scenarios import ConfigLike, EnvSpec, NodesLike, given_keys, resolve
 
 TRACE_NODES = 7
 MAX_EPISODES = 100_000
@@ -45,38 +45,44 @@ class Job:
     """One episode of an evaluation (picklable: it crosses into a worker process)."""
 
     policy: str
-    n_auvs: int
-    n_nodes: int
+    spec: EnvSpec
     seed: int
-    backend: str
-    layout: str
-    base: Config
     keep_trace: bool = False
     trust_pickle: bool = False
 
 
-def scenario_env(n_auvs: int, n_nodes: int, backend: str, layout: str, base: Config) -> Any:
-    """The env of one evaluation cell: "paper" is the paper's layout for K = 7 and 13 and one
-    seeded layout per K otherwise (`fixed_config`); "random" draws a new layout every episode
-    from the task RNG, so `reset(seed=S + e)` gives every policy the same layouts."""
-    if layout == "random":
-        return gym.make(
-            ENV_ID, backend=backend, n_auvs=n_auvs, n_nodes=n_nodes, layout="random", config=base
-        )
-    return gym.make(ENV_ID, backend=backend, config=fixed_config(n_auvs, n_nodes, base))
+def scenario_grid(
+    base: ConfigLike,
+    n_auvs: list[int] | None,
+    nodes: list[int] | None,
+    layout: str | None,
+    backend: str,
+    nodes_file: NodesLike = None,
+) -> list[EnvSpec]:
+    """The scenarios of an evaluation, one per (N, K). A list left out is the config's own
+    value if it sets one (its nodes: in every episode), else N = 1, 2 and K = 7."""
+    sets = given_keys(base) | ({"nodes_m"} if nodes_file is not None else set())
+    ns: list[int | None] = list(n_auvs) if n_auvs else ([None] if "n_auvs" in sets else [1, 2])
+    ks: list[int | None] = list(nodes) if nodes else ([None] if "nodes_m" in sets else [7])
+    return [resolve(base, n, k, layout, backend, nodes_file, flags=True) for n in ns for k in ks]
+
+
+def scenario_env(spec: EnvSpec) -> Any:
+    """The env of one evaluation cell."""
+    return gym.make(ENV_ID, backend=spec.backend, config=spec)
 
 
 def _episode(job: Job) -> dict[str, Any]:
-    env = scenario_env(job.n_auvs, job.n_nodes, job.backend, job.layout, job.base)
+    env = scenario_env(job.spec)
     policy = load_policy(job.policy, env, job.seed, job.trust_pickle)
     metrics = run_episode(env, policy, job.seed)
     row: dict[str, Any] = {
         "policy": job.policy,
-        "n_auvs": job.n_auvs,
-        "n_nodes": job.n_nodes,
-        "layout": job.layout,
+        "n_auvs": job.spec.n_auvs,
+        "n_nodes": job.spec.n_nodes,
+        "layout": job.spec.layout,
         "seed": job.seed,
-        "backend": job.backend,
+        "backend": job.spec.backend,
         **metrics,
     }
     if job.keep_trace:
@@ -98,23 +104,18 @@ def _pool(workers: int) -> Any:
 
 
 def _cells(
-    policies: list[str],
-    n_auvs: list[int],
-    nodes: list[int],
-    layout: str,
-    base: Config,
-    trust_pickle: bool,
-) -> tuple[list[tuple[str, int, int]], list[str]]:
-    """The (policy, N, K) cells a policy can serve, and why the others are skipped. An
+    policies: list[str], specs: list[EnvSpec], trust_pickle: bool
+) -> tuple[list[tuple[str, EnvSpec]], list[str]]:
+    """The (policy, scenario) cells a policy can serve, and why the others are skipped. An
     unknown or unreadable policy fails here, before any worker starts."""
     cells, skipped = [], []
-    for name, n, k in product(policies, n_auvs, nodes):
-        env = scenario_env(n, k, "kinematic", layout, base)
+    for name, spec in product(policies, specs):
+        env = scenario_env(dataclasses.replace(spec, backend="kinematic"))
         try:
             load_policy(name, env, trust_pickle=trust_pickle)
-            cells.append((name, n, k))
+            cells.append((name, spec))
         except PolicyMismatchError as exc:
-            skipped.append(f"skipped {name} at N={n}, K={k}: {exc}")
+            skipped.append(f"skipped {name} at N={spec.n_auvs}, K={spec.n_nodes}: {exc}")
         finally:
             env.close()
     return cells, skipped
@@ -179,8 +180,8 @@ def _run(
 
 def evaluate(
     policies: list[str],
-    n_auvs: list[int],
-    nodes: list[int],
+    n_auvs: list[int] | None,
+    nodes: list[int] | None,
     episodes: int,
     seed: int,
     backend: str,
@@ -188,28 +189,27 @@ def evaluate(
     progress: bool = True,
     trust_pickle: bool = False,
     skipped: list[str] | None = None,
-    layout: str = "paper",
-    base: Config | None = None,
+    layout: str | None = None,
+    base: ConfigLike = None,
     ray_address: str | None = None,
     ray_timeout_s: float | None = None,
+    nodes_file: NodesLike = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run every (policy, N, K, episode) a policy can serve; returns (summary rows, episode
-    rows). `layout` and `base` (the env config: current, noise, reward, physics; its N and K
-    come from the arguments) are as for `scenario_env`. Cells a trained policy cannot serve
+    rows). The scenarios are `scenario_grid`'s (the env config `base`: current, noise,
+    reward, physics, and its own N or nodes if it sets them). Cells a trained policy cannot serve
     (another N, K or action mapping) are skipped and said in `skipped`. With `ray_address`
     ("local" or a cluster address, joined within `ray_timeout_s`) the episodes run as Ray
     tasks: the same rows. `workers` is at most the CPUs this process may use (default: as
     many as there are CPUs and episodes); a policy, N or K given twice is refused."""
     if episodes < 1:
         raise UsageError(f"episodes={episodes}: accepted an integer >= 1")
-    if layout not in LAYOUTS:
-        raise ConfigError(f"layout={layout!r} is invalid: accepted one of {LAYOUTS}")
     for what, values in (("policy", policies), ("N", n_auvs), ("K", nodes)):
-        _once_each(what, list(values))
+        _once_each(what, list(values or []))
     if workers is not None:
         cpu_bounded(workers, "workers", 1)
-    base = base or Config()
-    cells, notes = _cells(policies, n_auvs, nodes, layout, base, trust_pickle)
+    specs = scenario_grid(base, n_auvs, nodes, layout, backend, nodes_file)
+    cells, notes = _cells(policies, specs, trust_pickle)
     if skipped is not None:
         skipped.extend(notes)
     if not cells:
@@ -220,14 +220,19 @@ def evaluate(
             f"accepted at most {MAX_EPISODES} in one evaluation"
         )
     jobs = [
-        Job(p, n, k, seed + e, backend, layout, base, e == 0 and k == TRACE_NODES, trust_pickle)
-        for (p, n, k), e in product(cells, range(episodes))
+        Job(p, spec, seed + e, e == 0 and _traced(spec), trust_pickle)
+        for (p, spec), e in product(cells, range(episodes))
     ]
     workers = workers or min(len(jobs), usable_cpus())
     with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=not progress) as bar:
         results = _run(jobs, workers, ray_address, ray_timeout_s, lambda: bar.update(1))
     results.sort(key=lambda r: (r["policy"], r["n_auvs"], r["n_nodes"], r["seed"]))
     return summarize(results), results
+
+
+def _traced(spec: EnvSpec) -> bool:
+    """Whether the first episode of a cell keeps its trace (the figures' K = 7, or own nodes)."""
+    return spec.n_nodes == TRACE_NODES or spec.layout == "custom"
 
 
 def save(rows: list[dict[str, Any]], episodes: list[dict[str, Any]], out: Path) -> None:

@@ -19,8 +19,9 @@ from tqdm import tqdm
 from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
+from iout_mj.errors import UsageError
 from iout_mj.experiments.figures import trajectory_figure
-from iout_mj.scenarios import ConfigLike, load_config
+from iout_mj.scenarios import ConfigLike, resolve
 
 
 def use_bundled_ffmpeg() -> None:
@@ -54,25 +55,26 @@ def run_mission(
     slots: int | None = None,
     name: str = "mission",
     trust_pickle: bool = False,
-    layout: str = "paper",
 ) -> dict[str, Any]:
     """Fly one mission and write `<name>.json`, `<name>_trajectory.png`, and (with `video`)
-    `<name>.mp4` plus its last frame `<name>.png` into `out`. `config` is used as it is (the
-    paper's defaults for None: N = 2, K = 7). A mission whose physics diverged has
-    `metrics["valid"] = False` and the error in `metrics["error"]`. With `layout="random"` the
-    nodes are drawn from the episode's seed."""
-    cfg = load_config(config)
+    `<name>.mp4` plus its last frame `<name>.png` into `out`. `config` is resolved as for any
+    env (`scenarios.resolve`; an `EnvSpec` as it is; None: the paper's N = 2, K = 7). A mission
+    whose physics diverged, or with a non-finite metric, has `metrics["valid"] = False` and the
+    error in `metrics["error"]`. With the random layout the nodes are drawn from the episode's
+    seed."""
+    spec = resolve(config, backend=backend)
+    cfg = spec.config
     n_auvs, n_nodes = cfg.scenario.n_auvs, cfg.scenario.n_nodes
     if slots is not None:
         if slots < 1:
-            raise ValueError(f"slots={slots}: accepted an integer >= 1")
+            raise UsageError(f"slots={slots}: accepted an integer >= 1")
         cfg = cfg.replace(scenario=dataclasses.replace(cfg.scenario, horizon_slots=slots))
+        spec = dataclasses.replace(spec, config=cfg)
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(
         ENV_ID,
         backend=backend,
-        config=cfg,
-        layout=layout,
+        config=spec,
         render_mode="rgb_array_list" if video else None,
         width=width,
         height=height,
