@@ -21,13 +21,12 @@ from iout_mj.backends.registry import SINGLE_ENV_BACKENDS as BACKENDS
 from iout_mj.cli_args import int_at_least, int_between, positive_distance, positive_seconds
 from iout_mj.errors import IoutError
 from iout_mj.scenarios import LAYOUTS
-from iout_mj.schema import ConfigError
 
 BASELINES = ("greedy", "round-robin", "random-walk", "planner", "comm-first", "tour-scheduler")
 """The names of `agents.registry.POLICIES`, in its order."""
 MAX_FRAME_PX = (1920, 1080)
 """The offscreen framebuffer of the scene (`offwidth`, `offheight` of assets/arena.xml)."""
-ERRORS = (IoutError, ConfigError)
+ERRORS = (IoutError,)
 """Bad input, reported as a message and exit 2; any other exception is a bug (a traceback)."""
 INTERRUPTED = 130
 """Exit code after Ctrl-C (128 + SIGINT, as shells report it)."""

@@ -19,6 +19,8 @@ from typing import Any
 
 import yaml
 
+from iout_mj.errors import IoutError
+
 MAX_FILE_BYTES = 1 << 20
 """Config files are small; a larger one is refused unread."""
 MAX_ALIASES = 64
@@ -31,7 +33,7 @@ MAX_SHOWN = 120
 """Characters of a value an error message shows."""
 
 
-class ConfigError(ValueError):
+class ConfigError(IoutError, ValueError):
     """A configuration value, key or file is invalid; the message says what is accepted."""
 
 

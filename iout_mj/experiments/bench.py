@@ -24,6 +24,7 @@ from iout_mj.experiments.bench_training import (
     memory_mb,
     ppo_fps,
 )
+from iout_mj.runtime import usable_cpus
 from iout_mj.scenarios import fixed_config
 from iout_mj.types import FloatArray
 
@@ -172,7 +173,7 @@ def render_fps(frames: int = 16) -> float:
 def thread_scaling(n: int, k: int, calls: int = 5) -> float:
     """PhysicsVecEnv steps/s on two rollout threads over one (both in one process)."""
     rates = []
-    for nthread in (0, 2):
+    for nthread in (0, min(2, usable_cpus())):
         venv = PhysicsVecEnv(PHYSICS_BATCH, config=fixed_config(n, k), seed=0, nthread=nthread)
         actions = _random_actions(venv.action_space, 16, (PHYSICS_BATCH,))
         venv.reset()

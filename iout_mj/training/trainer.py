@@ -5,7 +5,6 @@ normalisation statistics)."""
 from __future__ import annotations
 
 import dataclasses
-import os
 import shutil
 from pathlib import Path
 from typing import Any
@@ -34,6 +33,7 @@ from iout_mj.envs.scenario_vec_env import ScenarioVecEnv
 from iout_mj.errors import CheckpointError
 from iout_mj.mission.stats import episode_summary
 from iout_mj.mission.tokens import K_MAX
+from iout_mj.runtime import usable_cpus
 from iout_mj.schema import ConfigError
 from iout_mj.training import imitation
 from iout_mj.training.callbacks import EvalCheckpointCallback, MissionLoggerCallback
@@ -82,7 +82,7 @@ def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bo
     """The training VecEnv: one batch of `n_envs` environments in this process (with tokens,
     `n_envs` per scenario cell), for either backend; with `parallel`, the MuJoCo rollout runs
     on one C thread per core."""
-    threads = min(n_envs, os.cpu_count() or 1) if parallel and backend == "mujoco" else 0
+    threads = min(n_envs, usable_cpus()) if parallel and backend == "mujoco" else 0
     if cfg.policy == "tokens":
         return VecMonitor(ScenarioVecEnv(scenario_cells(cfg), n_envs, backend, seed, threads))
     kinds = {"kinematic": KinematicVecEnv, "mujoco": PhysicsVecEnv, "warp": WarpVecEnv}

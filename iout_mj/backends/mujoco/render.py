@@ -19,6 +19,7 @@ import iout_mj
 from iout_mj import palette
 from iout_mj.backends.mujoco import names, vehicle
 from iout_mj.backends.mujoco.physics import AUVPhysics, joint_addresses
+from iout_mj.errors import IoutError
 from iout_mj.mission import Mission
 from iout_mj.mission.observation import node_energy_level
 from iout_mj.types import FloatArray
@@ -29,7 +30,7 @@ MARKER_LENGTH_M = 40.0
 LINK_WIDTH_PX = 3.0
 
 
-class RenderError(RuntimeError):
+class RenderError(IoutError, RuntimeError):
     """No offscreen OpenGL backend works on this machine."""
 
 
