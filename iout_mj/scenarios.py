@@ -201,6 +201,7 @@ def read_nodes(nodes: NodesLike) -> tuple[Point, ...] | None:
         if path.stat().st_size > MAX_NODES_FILE_BYTES:
             raise ConfigError(f"nodes file {path} is larger than {MAX_NODES_FILE_BYTES} bytes")
         rows: list[tuple[float, float]] = []
+        header = False
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             cells = [c.strip() for c in line.split("#")[0].split(",")]
             if cells == [""]:
@@ -208,8 +209,9 @@ def read_nodes(nodes: NodesLike) -> tuple[Point, ...] | None:
             try:
                 values = [float(c) for c in cells]
             except ValueError:
-                if not rows and number == 1:
-                    continue  # a header
+                if not rows and not header:
+                    header = True  # one header row, before the data
+                    continue
                 raise ConfigError(
                     f"{path}:{number}: {line.strip()!r} is not a row of numbers; accepted "
                     "'x, y' in metres per row"
