@@ -9,13 +9,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import (
-    VecEnv,
-    VecEnvIndices,
     VecEnvObs,
     VecEnvStepReturn,
 )
@@ -23,6 +20,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 from iout_mj.config import Config
 from iout_mj.envs.batch import MissionBatch, rng_arrays, set_rng
 from iout_mj.envs.vec_env import (
+    BatchedVecEnv,
     batch_state_arrays,
     check_open,
     load_batch_state_arrays,
@@ -88,7 +86,7 @@ def _check_shared(cells: Sequence[tuple[int, Config]]) -> None:
             )
 
 
-class ScenarioVecEnv(VecEnv):
+class ScenarioVecEnv(BatchedVecEnv):
     """B environments spread over scenario cells, random layouts.
 
     Args:
@@ -103,6 +101,8 @@ class ScenarioVecEnv(VecEnv):
     last step's reward terms of all environments. Stepping or resetting after `close()`
     raises `RuntimeError`.
     """
+
+    _envs_live_in = "venv.cells[c].batch"
 
     def __init__(
         self,
@@ -206,30 +206,3 @@ class ScenarioVecEnv(VecEnv):
         for c in self.cells:
             c.batch.close()
         self.closed = True
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self, attr_name)] * len(self._get_indices(indices))
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        raise AttributeError(
-            f"set_attr({attr_name!r}): the environments of a ScenarioVecEnv live in its cells' "
-            "batches and have no per-environment attributes"
-        )
-
-    def env_method(
-        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kw: Any
-    ) -> list[Any]:
-        raise AttributeError(
-            f"env_method({method_name!r}): a ScenarioVecEnv has no per-environment objects; "
-            "use venv.cells[c].batch"
-        )
-
-    def env_is_wrapped(
-        self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None
-    ) -> list[bool]:
-        return [False] * len(self._get_indices(indices))
-
-    def _get_indices(self, indices: VecEnvIndices) -> Sequence[int]:
-        if indices is None:
-            return range(self.num_envs)
-        return [indices] if isinstance(indices, int) else list(indices)

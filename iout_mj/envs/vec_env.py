@@ -78,7 +78,42 @@ def load_batch_state_arrays(
         batch.load_state_arrays(saved)
 
 
-class MissionVecEnv(VecEnv):
+class BatchedVecEnv(VecEnv):
+    """The per-environment parts of SB3's VecEnv API for environments that live in batches
+    (no per-environment objects): attributes are the VecEnv's, methods refused with where the
+    environments are (`_envs_live_in`)."""
+
+    _envs_live_in = "venv.mission"
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        raise AttributeError(
+            f"set_attr({attr_name!r}): the environments of a {type(self).__name__} live in "
+            f"batches ({self._envs_live_in}) and have no per-environment attributes"
+        )
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kw: Any
+    ) -> list[Any]:
+        raise AttributeError(
+            f"env_method({method_name!r}): a {type(self).__name__} has no per-environment "
+            f"objects; use {self._envs_live_in}"
+        )
+
+    def env_is_wrapped(
+        self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None
+    ) -> list[bool]:
+        return [False] * len(self._get_indices(indices))
+
+    def _get_indices(self, indices: VecEnvIndices) -> Sequence[int]:
+        if indices is None:
+            return range(self.num_envs)
+        return [indices] if isinstance(indices, int) else list(indices)
+
+
+class MissionVecEnv(BatchedVecEnv):
     """A `MissionBatch` behind the SB3 VecEnv interface.
 
     Args:
@@ -169,33 +204,6 @@ class MissionVecEnv(VecEnv):
     def close(self) -> None:
         self.batch.close()
         self.closed = True
-
-    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        return [getattr(self, attr_name)] * len(self._get_indices(indices))
-
-    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        raise AttributeError(
-            f"set_attr({attr_name!r}): the environments of a {type(self).__name__} share one "
-            "batch and have no per-environment attributes"
-        )
-
-    def env_method(
-        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kw: Any
-    ) -> list[Any]:
-        raise AttributeError(
-            f"env_method({method_name!r}): a {type(self).__name__} has no per-environment "
-            "objects; use venv.mission"
-        )
-
-    def env_is_wrapped(
-        self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None
-    ) -> list[bool]:
-        return [False] * len(self._get_indices(indices))
-
-    def _get_indices(self, indices: VecEnvIndices) -> Sequence[int]:
-        if indices is None:
-            return range(self.num_envs)
-        return [indices] if isinstance(indices, int) else list(indices)
 
 
 class KinematicVecEnv(MissionVecEnv):
