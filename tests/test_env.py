@@ -9,13 +9,14 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+from iout_mj.backends.registry import SINGLE_ENV_BACKENDS
 from iout_mj.envs import ENV_ID, MultiAUVEnv
 from iout_mj.experiments.bench_training import peak_rss_mb
 from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError
 from iout_mj.world.geometry import wrap_angle
 
-BACKENDS = ["kinematic", "mujoco"]
+BACKENDS = list(SINGLE_ENV_BACKENDS)  # the registry's one-env backends
 METRIC_KEYS = {
     "mean_aoi",
     "objective",

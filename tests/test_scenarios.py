@@ -189,3 +189,18 @@ def test_your_own_network_end_to_end_from_a_csv(tmp_path, cli):
     )
     assert json.loads(mission.stdout)["n_nodes"] == 5
     assert (tmp_path / "mission" / "mission.mp4").stat().st_size > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", list(BACKENDS))
+def test_every_registered_backend_steps_a_batch_of_the_same_scenario(backend):
+    if BACKENDS[backend].extra is not None:
+        pytest.importorskip("mujoco_warp")
+    from iout_mj.envs.batch import MissionBatch
+
+    batch = MissionBatch(2, backend, n_auvs=2, config={"scenario": {"nodes_m": NODES}}, seed=0)
+    assert batch.env_spec.layout == "custom" and batch.env_spec.backend == backend
+    batch.restart()
+    rewards, failed = batch.move(np.tile([5, 3, 0, 1] * 2, (2, 1)))
+    assert np.isfinite(rewards).all() and not failed.any()
+    assert (batch.mission.network.nodes_m == np.array(NODES)).all()
