@@ -25,7 +25,7 @@ $(NATIVE): $(STAMP) $(NATIVE_SOURCES)
 	touch $(NATIVE)
 
 run: $(NATIVE)
-	$(BIN)/iout-mj render --policy ppo-general --width 960 --height 540 --out renders/mission.mp4
+	$(BIN)/iout-mj render --policy ppo-general --width 960 --height 540 --out renders
 
 test: $(NATIVE)
 	$(BIN)/python -m pytest -q

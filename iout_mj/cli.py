@@ -1,5 +1,8 @@
-"""`iout-mj`: link-budget, validate-energy, mission, render, evaluate, sweep, figures, train,
-bench.
+"""`iout-mj`: the paper's missions on MuJoCo physics, their evaluation and training.
+
+Commands: link-budget, validate-energy, mission, render, evaluate, compare, figures, train,
+export, sweep, bench, config, list. `--out` is always a folder; `--config` always an env config
+(nodes, N, current, noise, reward, physics: `iout-mj config --dump` lists every key).
 
 Exit codes: 0 done; 1 a bug (the traceback is shown); 2 bad input (the message says what is
 accepted); 3 the physics diverged (the mission's metrics are written, marked invalid); 130
@@ -9,6 +12,7 @@ interrupted (Ctrl-C).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -119,8 +123,14 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="iout-mj", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = argparse.ArgumentParser(
+        prog="iout-mj", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument(
+        "--quiet", action="store_true", help="no progress bars (errors and results still print)"
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     fmt: dict[str, Any] = {"formatter_class": _HelpFormatter}
 
     p = sub.add_parser("link-budget", help="AET harvest and uplink energy vs distance", **fmt)
@@ -151,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="a mission to MP4 (headless EGL)", **fmt)
     _mission_arguments(p, width=1280, height=720)
-    p.add_argument("--out", default="renders/mission.mp4", help="the MP4 to write")
+    p.add_argument("--out", default="renders", help="folder for mission.{mp4,png,json}")
     p.set_defaults(func="cmd_render")
 
     p = sub.add_parser("evaluate", help="seeded episodes per (policy, N, K): mean and std", **fmt)
@@ -267,13 +277,13 @@ def build_parser() -> argparse.ArgumentParser:
         "export", help="a training checkpoint as a policy folder to ship or share", **fmt
     )
     p.add_argument("checkpoint", help="a run's best/ or last/ folder")
-    p.add_argument("out", help="the policy folder to write (replaced whole)")
+    p.add_argument("--out", required=True, help="the policy folder to write (replaced whole)")
     p.set_defaults(func="cmd_export")
 
     p = sub.add_parser("bench", help="throughput benchmarks (ratios measured in one run)", **fmt)
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test)")
-    p.add_argument("--out", help="also write the JSON to this file")
+    p.add_argument("--out", help="also write the run as bench.json (bench-warp.json) here")
     p.add_argument("--markdown", action="store_true", help="the README's table")
     p.add_argument("--from-json", help="format a saved run instead of measuring")
     p.add_argument(
@@ -294,7 +304,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", nargs="+", help="training run folders (training curves)")
     p.add_argument("--out", help="folder for the PNGs (default: the results folder)")
     p.set_defaults(func="cmd_figures")
+
+    p = sub.add_parser("config", help="the env config: every key, default, unit and range", **fmt)
+    p.add_argument(
+        "--config", help="a YAML/JSON env config to show whole (default: the paper's values)"
+    )
+    p.add_argument(
+        "--markdown", action="store_true", help="the reference as Markdown (docs/config.md)"
+    )
+    p.add_argument(
+        "--dump", action="store_true", help="commented YAML, a file to start from (the default)"
+    )
+    p.set_defaults(func="cmd_config")
+
+    p = sub.add_parser("list", help="scenarios, policies, backends, layouts and vehicles", **fmt)
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func="cmd_list")
     return parser
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("iout-mj")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "unknown"
 
 
 def _ray_timeout(p: argparse.ArgumentParser) -> None:
@@ -321,6 +356,8 @@ def _interrupted(exc: BaseException | None) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.quiet:
+        os.environ["TQDM_DISABLE"] = "1"  # every progress bar of the project is tqdm's
     try:
         from iout_mj import commands  # the layers each command runs import when it runs
 

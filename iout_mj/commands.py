@@ -129,11 +129,11 @@ def cmd_mission(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    video = Path(args.out)
-    if video.suffix != ".mp4":
-        raise UsageError(f"--out {video}: accepted a path ending in .mp4")
-    summary = _run_mission(args, video.parent, video.stem, video=True)
-    print(f"{video} ({summary['video_frames']} frames), {video.with_suffix('.png')}")
+    out = Path(args.out)
+    if out.suffix == ".mp4":
+        raise UsageError(f"--out {out}: accepted a folder (render writes mission.mp4 into it)")
+    summary = _run_mission(args, out, "mission", video=True)
+    print(f"{out / 'mission.mp4'} ({summary['video_frames']} frames), {out / 'mission.png'}")
     return _diverged(summary, "render")
 
 
@@ -264,15 +264,14 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from iout_mj.experiments import bench, bench_report  # heavy: see the module docstring
 
-    if args.out:
-        writable_dir(Path(args.out).parent)
+    out = writable_dir(Path(args.out)) if args.out else None
     if args.warp:
         from iout_mj.experiments import bench_warp
 
         say = lambda stage: print(f"bench: {stage} ...", file=sys.stderr)  # noqa: E731
         warp = bench_warp.run(args.warp_sizes, say=say)
-        if args.out:
-            _write_json(Path(args.out), warp)
+        if out:
+            _write_json(out / "bench-warp.json", warp)
         print(json.dumps(warp, indent=2) if args.json else bench_warp.format_table(warp))
         return 0
     if args.from_json:
@@ -281,8 +280,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         result = bench.run_all(
             quick=args.quick, say=lambda stage: print(f"bench: {stage} ...", file=sys.stderr)
         )
-    if args.out:
-        _write_json(Path(args.out), result)
+    if out:
+        _write_json(out / "bench.json", result)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -306,4 +305,45 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     with output_lock(out, "sweep"):
         result = ray_jobs.sweep(args.config, out, args.ray, args.ray_timeout)
     print(json.dumps(result, indent=2))
+    return 0
+
+
+def cmd_config(args: argparse.Namespace) -> int:
+    from iout_mj import config_reference
+
+    if args.markdown:
+        print(config_reference.markdown(), end="")
+    else:
+        print(config_reference.dump_yaml(load_config(args.config)), end="")
+    return 0
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from iout_mj.agents.registry import POLICIES
+    from iout_mj.agents.shipped import shipped_policies
+    from iout_mj.backends.registry import BACKENDS
+    from iout_mj.scenarios import SCENARIOS
+
+    listing = {
+        "scenarios": {k: f"K = {s.n_nodes}, layout {s.layout}" for k, s in SCENARIOS.items()},
+        "policies": {
+            **{k: "baseline" for k in POLICIES},
+            **{k: "shipped PPO policy" for k in shipped_policies()},
+            "ppo-general": "the shipped general policy for the env's N",
+        },
+        "backends": {k: b.description for k, b in BACKENDS.items()},
+        "layouts": {
+            "paper": "the paper's nodes for K = 7 and 13, one seeded layout per K otherwise",
+            "random": "a new layout every episode",
+            "custom": "a config's own scenario.nodes_m, or --nodes-file",
+        },
+        "vehicles": {"paper-torpedo": "assets/auv.xml, the paper's C_d and S (the only hull)"},
+    }
+    if args.json:
+        print(json.dumps(listing, indent=2))
+        return 0
+    for group, items in listing.items():
+        print(f"{group}:")
+        for name, what in items.items():
+            print(f"  {name:<22} {what}")
     return 0

@@ -43,13 +43,26 @@ def shown(value: Any) -> str:
     return text if len(text) <= MAX_SHOWN else text[: MAX_SHOWN - 15] + f"... ({len(text)} chars)"
 
 
+ACCEPTED: dict[str, dict[str, None]] = {}
+"""What each checked field accepts, keyed "Owner.field", as its checks state it: every check
+notes its text here, so the config reference (`config_reference`) is made from the checks
+themselves. A few texts per field at most (some quote the values they were checked with)."""
+_owner = [""]
+
+
 def require(ok: bool, name: str, value: Any, accepted: str) -> None:
+    texts = ACCEPTED.setdefault(f"{_owner[0]}.{name}", {})
+    if len(texts) < 4:
+        texts[accepted] = None
     if not ok:
         raise ConfigError(f"{name}={shown(value)} is invalid: accepted {accepted}")
 
 
 def check_finite(obj: Any) -> None:
-    """Every number of a dataclass (in tuples too) is finite: NaN and inf are never settings."""
+    """Every number of a dataclass (in tuples too) is finite: NaN and inf are never settings.
+    (Called first by every config's checks: the checks that follow note what they accept
+    under its class's name.)"""
+    _owner[0] = type(obj).__name__
     for f in dataclasses.fields(obj):
         for value in _numbers(getattr(obj, f.name)):
             require(math.isfinite(value), f.name, getattr(obj, f.name), "finite numbers only")

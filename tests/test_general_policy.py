@@ -201,7 +201,7 @@ def test_general_pipeline_trains_saves_and_flies_any_k(tmp_path, cli):
     )
     assert json.loads(refused.stdout or "[]") == []  # N = 2 is not its N: the cell is skipped
     shipped = tmp_path / "shipped"
-    cli("export", out / "best", shipped)
+    cli("export", out / "best", "--out", shipped)
     manifest = json.loads((shipped / "policy.json").read_text())
     assert "rng" not in manifest and manifest["eval_at_selection"]["num_timesteps"] >= 0
     weights = (shipped / "weights.safetensors").stat().st_size

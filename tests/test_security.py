@@ -75,7 +75,7 @@ def test_every_loading_path_refuses_a_pickled_policy(malicious, cli, tmp_path):
     for args in (
         ("evaluate", "--policy", folder, "--n-auvs", "1", "--episodes", "1"),
         ("mission", "--policy", folder, "--n-auvs", "1", "--no-video", "--out", tmp_path / "m"),
-        ("render", "--policy", folder, "--n-auvs", "1", "--out", tmp_path / "r.mp4"),
+        ("render", "--policy", folder, "--n-auvs", "1", "--out", tmp_path / "r"),
     ):
         out = cli(*args, check=False)
         assert out.returncode == 2 and "--trust-pickle" in out.stderr, out.stderr
