@@ -10,6 +10,7 @@ from __future__ import annotations
 import ast
 import dataclasses
 import inspect
+import itertools
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,7 +57,7 @@ def _docstrings(cls: type) -> dict[str, str]:
     tree = ast.parse(inspect.getsource(cls))
     body = tree.body[0].body  # type: ignore[attr-defined]
     docs = {}
-    for stmt, after in zip(body, body[1:], strict=False):
+    for stmt, after in itertools.pairwise(body):
         if (
             isinstance(stmt, ast.AnnAssign)
             and isinstance(stmt.target, ast.Name)
@@ -139,7 +140,9 @@ def dump_yaml(cfg: Config | None = None) -> str:
             current = row.section
         indent = "  " * len(path)
         notes = "; ".join(n for n in (row.unit, *row.accepted, row.doc) if n)
-        lines.append(f"{indent}{row.name}: {_plain(row.default)}" + (f"  # {notes}" if notes else ""))
+        lines.append(
+            f"{indent}{row.name}: {_plain(row.default)}" + (f"  # {notes}" if notes else "")
+        )
     return "\n".join(lines) + "\n"
 
 

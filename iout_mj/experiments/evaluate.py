@@ -224,7 +224,7 @@ def evaluate(
         for (p, spec), e in product(cells, range(episodes))
     ]
     workers = workers or min(len(jobs), usable_cpus())
-    quiet = {} if progress else {"disable": True}  # else tqdm's own default (TQDM_DISABLE)
+    quiet: dict[str, Any] = {} if progress else {"disable": True}  # else tqdm's (TQDM_DISABLE)
     with tqdm(total=len(jobs), desc="episodes", unit="ep", **quiet) as bar:
         results = _run(jobs, workers, ray_address, ray_timeout_s, lambda: bar.update(1))
     results.sort(key=lambda r: (r["policy"], r["n_auvs"], r["n_nodes"], r["seed"]))
