@@ -91,7 +91,11 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
     p.add_argument("--backend", choices=BACKENDS, default="mujoco", help="how vehicles move")
     p.add_argument("--seed", type=int_at_least(0), default=0, help="episode seed (>= 0)")
     p.add_argument(
-        "--slots", type=int_at_least(1), default=None, help="stop after this many 25 s slots"
+        "--slots",
+        type=int_at_least(1),
+        default=None,
+        help="stop early after this many slots (the mission and its horizon stay as they are; "
+        "metrics are those of the slots flown; default: fly to the end)",
     )
     frame = "the offscreen framebuffer of the scene"
     p.add_argument(

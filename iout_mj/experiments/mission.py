@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import shutil
@@ -65,11 +64,10 @@ def run_mission(
     spec = resolve(config, backend=backend)
     cfg = spec.config
     n_auvs, n_nodes = cfg.scenario.n_auvs, cfg.scenario.n_nodes
-    if slots is not None:
-        if slots < 1:
-            raise UsageError(f"slots={slots}: accepted an integer >= 1")
-        cfg = cfg.replace(scenario=dataclasses.replace(cfg.scenario, horizon_slots=slots))
-        spec = dataclasses.replace(spec, config=cfg)
+    if slots is not None and not 1 <= slots <= cfg.scenario.horizon_slots:
+        raise UsageError(
+            f"slots={slots}: accepted 1 to the mission's {cfg.scenario.horizon_slots} slots"
+        )
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(
         ENV_ID,
@@ -82,7 +80,7 @@ def run_mission(
     act = load_policy(policy, env, seed, trust_pickle)
     writer = None
     bar = tqdm(
-        total=cfg.scenario.horizon_slots,
+        total=slots or cfg.scenario.horizon_slots,
         desc=f"mission {policy} N={n_auvs} K={n_nodes}",
         unit="slot",
     )
@@ -104,7 +102,7 @@ def run_mission(
 
     start = time.perf_counter()
     try:
-        metrics = run_episode(env, act, seed, on_step)
+        metrics = run_episode(env, act, seed, on_step, max_steps=slots)
     finally:
         bar.total = bar.n  # an early docking ends the mission before T_max: 100 %
         bar.refresh()
