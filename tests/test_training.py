@@ -13,6 +13,7 @@ import torch
 import yaml
 from conftest import ROOT
 from safetensors.torch import load_file
+from test_training_output import assert_one_step_axis
 
 from iout_mj.agents import policy_format
 from iout_mj.agents.policies import SHIPPED_DIR, load_policy, shipped_policies
@@ -90,7 +91,9 @@ def weights(folder):
 
 def test_killed_and_resumed_run_ends_with_the_uninterrupted_weights(tmp_path, cli):
     """SIGKILL in the second phase; --resume continues from the end of the first phase and
-    ends with the same step count and, bit for bit, the same weights."""
+    ends with the same step count and, bit for bit, the same weights, and its TensorBoard log
+    reads as the uninterrupted run's (one step axis: what the killed run logged after its
+    checkpoint is hidden)."""
     config = tmp_path / "k.yaml"
     cfg = small(
         n_envs=4,
@@ -131,6 +134,7 @@ def test_killed_and_resumed_run_ends_with_the_uninterrupted_weights(tmp_path, cl
         == 512 + 4096
         == json.loads((tmp_path / "whole" / "state.json").read_text())["num_timesteps"]
     )
+    assert_one_step_axis(run, tmp_path / "whole")
 
 
 def test_policy_for_other_scenario_is_refused(tmp_path):

@@ -21,18 +21,20 @@ CELL_EPISODE_KEYS = ("mean_aoi", "docking_rate", "jain", "delivered_bits")
 class MissionLoggerCallback(BaseCallback):
     """TensorBoard at every rollout end: each reward term's mean over the rollout's steps and
     environments (`reward/<term>`), the mean summary of the episodes that ended in it
-    (`episode/<key>`), the run's own fps and, on a `ScenarioVecEnv`, the same per scenario
-    cell (`cell/<name>/reward/<term>`, `cell/<name>/episode/<key>` for CELL_EPISODE_KEYS);
-    also at the end of a phase that a callback stopped mid-rollout.
+    (`episode/<key>`), the run's own fps, the training phase (`train/phase`, from 1) where
+    given and, on a `ScenarioVecEnv`, the same per scenario cell (`cell/<name>/reward/<term>`,
+    `cell/<name>/episode/<key>` for CELL_EPISODE_KEYS); also at the end of a phase that a
+    callback stopped mid-rollout.
 
     Per step it adds the batch's (B, terms) array into per-cell sums (numpy) and reads the
     infos of the environments that ended; nothing is logged per step.
     """
 
-    def __init__(self, start_timesteps: int) -> None:
+    def __init__(self, start_timesteps: int, phase: int | None = None) -> None:
         super().__init__()
         self._t0 = time.perf_counter()
         self._n0 = start_timesteps
+        self._phase = phase
         self._terms: Callable[[], np.ndarray] | None = None
         self._names: list[str] = []
         """The cells' names on a ScenarioVecEnv (else none: one group of all environments)."""
@@ -97,6 +99,8 @@ class MissionLoggerCallback(BaseCallback):
                 self.logger.record(f"cell/{name}/episode/{key}", value)
         dt = time.perf_counter() - self._t0
         self.logger.record("time/fps_run", (self.model.num_timesteps - self._n0) / max(dt, 1e-9))
+        if self._phase is not None:
+            self.logger.record("train/phase", self._phase)
         self._clear()
 
 

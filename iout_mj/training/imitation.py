@@ -53,9 +53,11 @@ def fly(
     beta: float,
     planner: str,
     into: Demonstrations,
+    flown: Callable[[], object] | None = None,
 ) -> list[dict[str, Any]]:
     """Fly `episodes` kinematic episodes on random cells, recording the planner's actions in
-    the visited states; the learner acts where given (the planner with probability beta)."""
+    the visited states; the learner acts where given (the planner with probability beta);
+    `flown()` after every episode."""
     envs: dict[int, Any] = {}
     metrics = []
     for _ in range(episodes):
@@ -79,6 +81,8 @@ def fly(
             done = terminated or truncated
         into.rewards.append(np.asarray(rewards))
         metrics.append(info["metrics"])
+        if flown is not None:
+            flown()
     for env in envs.values():
         env.close()
     return metrics
@@ -103,10 +107,11 @@ def fit(
     learning_rate: float = 1e-3,
     rng: np.random.RandomState | None = None,
     batch_size: int = 256,
+    epoch_done: Callable[[int], object] | None = None,
 ) -> tuple[list[float], float, RunningMeanStd]:
-    """Train the SB3 policy on the demonstrations; returns the accuracy of its most likely
-    action per field (heading, speed, AET node, uplink node), the last negative
-    log-likelihood and the return statistics."""
+    """Train the SB3 policy on the demonstrations (`epoch_done(epochs so far)` after every
+    epoch); returns the accuracy of its most likely action per field (heading, speed, AET
+    node, uplink node), the last negative log-likelihood and the return statistics."""
     rng = rng or np.random.RandomState(0)
     rms = return_statistics(data.rewards, gamma)
     scale = float(np.sqrt(rms.var + 1e-8))
@@ -116,7 +121,7 @@ def fit(
     policy.set_training_mode(True)
     optimizer = torch.optim.Adam(policy.parameters(), lr=learning_rate)
     loss_pi = float("nan")
-    for _ in range(epochs):
+    for epoch in range(epochs):
         order = torch.as_tensor(rng.permutation(len(obs)))
         for i in range(0, len(obs), batch_size):
             idx = order[i : i + batch_size]
@@ -128,6 +133,8 @@ def fit(
             torch.nn.utils.clip_grad_norm_(policy.parameters(), 1.0)
             optimizer.step()
             loss_pi = float(nll.detach())
+        if epoch_done is not None:
+            epoch_done(epoch + 1)
     policy.set_training_mode(False)
     with torch.no_grad():
         chosen = torch.cat(

@@ -1,6 +1,7 @@
 """PPO training (stable-baselines3) through the phases of a `TrainConfig`, with checkpoints,
 held-out evaluation and `--resume` (same step count, learning-rate schedule and
-normalisation statistics)."""
+normalisation statistics); what the run shows on the console and in TensorBoard is
+`training.logs`."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 import torch
 import yaml
 from stable_baselines3 import PPO
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
@@ -46,6 +48,13 @@ from iout_mj.training.checkpoints import (
     save_checkpoint,
 )
 from iout_mj.training.config import TrainConfig
+from iout_mj.training.logs import (
+    Console,
+    eval_line,
+    log_run_start,
+    record_phase_start,
+    run_logger,
+)
 
 HELD_OUT_SEED = 1_000_000
 """Evaluation seeds start here; training episodes draw theirs from the training seed."""
@@ -125,9 +134,7 @@ def selection_score(metrics: dict[str, float]) -> float:
     return -metrics["mean_aoi_horizon"] - 100.0 * max(0.0, 0.95 - metrics["docking_rate"])
 
 
-def new_model(
-    cfg: TrainConfig, venv: Any, tensorboard: Path | None = None, device: str = "cpu"
-) -> Any:
+def new_model(cfg: TrainConfig, venv: Any, device: str = "cpu") -> Any:
     """A fresh PPO with the config's hyperparameters on `venv` (torch on `device`)."""
     if cfg.policy == "tokens":
         policy: Any = TokenPolicy
@@ -149,41 +156,79 @@ def new_model(
         device=device,
         verbose=0,
         policy_kwargs=kwargs,
-        tensorboard_log=None if tensorboard is None else str(tensorboard),
     )
 
 
-def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> None:
+def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> list[str]:
     """DAgger from the config's planner (`training.imitation`) on the scenario cells; the
-    return statistics of the planner's episodes become the VecNormalize's."""
+    return statistics of the planner's episodes become the VecNormalize's. With `progress`,
+    a bar of the episodes flown (its round and fitting epoch beside it) and a line per round;
+    returns those lines."""
     im = cfg.imitation
     assert im is not None
     rng = np.random.RandomState(cfg.seed)
     torch.manual_seed(cfg.seed)
     cells = scenario_cells(cfg)
     data = imitation.Demonstrations()
-    imitation.fly(cells, im.episodes, rng, None, 1.0, im.planner, data)
-    epochs, beta = im.epochs, im.beta
+    epochs, beta, lines = im.epochs, im.beta, []
+    bar = tqdm(
+        total=im.total_episodes,
+        unit="episode",
+        desc=f"{cfg.name} imitation (DAgger)",
+        disable=not progress,
+    )
 
     def learner(tokens: np.ndarray) -> np.ndarray:
         action, _ = model.policy.predict(tokens, deterministic=True)
         return action
 
-    for r in range(im.rounds + 1):
-        acc, nll, rms = imitation.fit(model.policy, data, cfg.gamma, epochs, im.learning_rate, rng)
-        if progress:
-            print(
-                f"imitation round {r}: {len(data.obs)} states, accuracy {np.round(acc, 3)}, "
-                f"nll {nll:.3f}",
-                flush=True,
+    def fitting(r: int, epochs: int) -> Any:
+        return lambda e: bar.set_postfix_str(f"round {r}/{im.rounds}: fitting, epoch {e}/{epochs}")
+
+    with bar:
+        bar.set_postfix_str(f"round 0/{im.rounds}: the planner flies")
+        imitation.fly(cells, im.episodes, rng, None, 1.0, im.planner, data, bar.update)
+        for r in range(im.rounds + 1):
+            acc, nll, rms = imitation.fit(
+                model.policy,
+                data,
+                cfg.gamma,
+                epochs,
+                im.learning_rate,
+                rng,
+                epoch_done=fitting(r, epochs),
             )
-        if r < im.rounds:
-            imitation.fly(cells, im.round_episodes, rng, learner, beta, im.planner, data)
-            epochs, beta = im.round_epochs, beta / 2
+            lines.append(
+                f"imitation round {r}/{im.rounds}: {len(data.obs):,} states, accuracy "
+                f"(heading, speed, AET node, uplink node) {np.round(acc, 3).tolist()}, "
+                f"nll {nll:.3f}"
+            )
+            if progress:
+                bar.write(lines[-1])
+            if r < im.rounds:
+                bar.set_postfix_str(
+                    f"round {r + 1}/{im.rounds}: the policy flies (the planner at p={beta:.3g})"
+                )
+                imitation.fly(
+                    cells, im.round_episodes, rng, learner, beta, im.planner, data, bar.update
+                )
+                epochs, beta = im.round_epochs, beta / 2
     model.get_vec_normalize_env().ret_rms = rms
+    return lines
 
 
-RUN_FILES = ("config.yaml", "state.json", "last", "best", "last.tmp", "last.old", "best.tmp")
+TENSORBOARD_DIR = "tb/ppo_0"
+"""The run's TensorBoard events, in its folder (`tensorboard --logdir <run>/tb`)."""
+RUN_FILES = (
+    "config.yaml",
+    "state.json",
+    "last",
+    "best",
+    "last.tmp",
+    "last.old",
+    "best.tmp",
+    "tb",
+)
 
 
 def _start(cfg: TrainConfig, out: Path, resume: bool, overwrite: bool) -> None:
@@ -212,7 +257,7 @@ def _start(cfg: TrainConfig, out: Path, resume: bool, overwrite: bool) -> None:
         raise CheckpointError(f"cannot write {out / 'config.yaml'}: {exc.strerror or exc}") from exc
 
 
-def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path) -> Any:
+def _phase_model(model: Any, cfg: TrainConfig, venv: Any) -> Any:
     """The model of a phase on `venv`: new for the first phase (or to be restored from a
     checkpoint), else the previous phase's model and statistics on the new backend."""
     # token features are scaled already (and padded with a mask): not normalised
@@ -221,7 +266,7 @@ def _phase_model(model: Any, cfg: TrainConfig, venv: Any, out: Path) -> Any:
     if not norm_obs:  # the identity transform, saved with the policy like any statistics
         normalized.obs_rms = RunningMeanStd(shape=venv.observation_space.shape)  # type: ignore[assignment]
     if model is None:
-        return new_model(cfg, normalized, out / "tb")
+        return new_model(cfg, normalized)
     stats = model.get_vec_normalize_env()
     normalized.obs_rms, normalized.ret_rms = stats.obs_rms, stats.ret_rms
     stats.close()
@@ -237,40 +282,51 @@ def train(
     parallel: bool = True,
     overwrite: bool = False,
 ) -> RunState:
-    """Train PPO through every phase; checkpoints in `out` (see `training.checkpoints`)."""
+    """Train PPO through every phase; checkpoints in `out` (see `training.checkpoints`), the
+    TensorBoard log in `out / TENSORBOARD_DIR`; with `progress`, a progress bar through the
+    imitation and each phase and a line per held-out evaluation (`run_summary` sums the run
+    up)."""
     torch.set_num_threads(cfg.torch_threads)
     _start(cfg, out, resume, overwrite)
-    state = RunState()
+    # the run state is the checkpoint's own on resume
+    state = read_run_state(out / "last", cfg) if resume else RunState()
+    console = Console(cfg, progress)
+    try:
+        _train(cfg, out, state, resume, parallel, console)
+    finally:
+        console.close()
+    return state
+
+
+def _train(
+    cfg: TrainConfig, out: Path, state: RunState, resume: bool, parallel: bool, console: Console
+) -> None:
     model: Any = None
+    logger: Logger | None = None
     resumed: Resumed | None = None
-    if resume:  # the run state is the checkpoint's own
-        state = read_run_state(out / "last", cfg)
-    bar = tqdm(
-        total=cfg.total_timesteps,
-        initial=state.num_timesteps,
-        unit="step",
-        desc=cfg.name,
-        disable=not progress,
-    )
     phase_start = sum(p.timesteps for p in cfg.phases[: state.phase])
     index = state.phase
 
-    def progress_to(num_timesteps: int) -> None:
-        bar.update(num_timesteps - bar.n)
-
     def checkpoint(model: Any) -> None:
-        backend = cfg.phases[min(index, len(cfg.phases) - 1)].backend
+        """Evaluate; log it (TensorBoard first, see `logs.run_logger`), then save."""
+        backend = cfg.phases[index].backend
         metrics = evaluate_model(
             model, model.get_vec_normalize_env(), cfg, backend, cfg.eval_episodes
         )
-        if getattr(model, "_logger", None) is not None:  # absent until learn() ran
-            for k, v in metrics.items():
-                model.logger.record(f"eval/{k}", v)
         state.num_timesteps = model.num_timesteps
-        entry = {"num_timesteps": model.num_timesteps, "phase": state.phase, "backend": backend}
+        entry = {
+            "num_timesteps": model.num_timesteps,
+            "phase": index + 1,
+            "phases": len(cfg.phases),
+            "backend": backend,
+        }
         entry.update(metrics)
         state.history.append(entry)
         score = selection_score(metrics)
+        for k, v in metrics.items():
+            model.logger.record(f"eval/{k}", v)
+        model.logger.dump(model.num_timesteps)
+        console.line(eval_line(entry, score > state.best_score))
         extra = {"eval": entry, "env_phase": index}
         if score > state.best_score:
             state.best_score = score
@@ -280,43 +336,94 @@ def train(
         save_checkpoint(model, out / "last", cfg, state, extra, live)
         state.save(out / "state.json")
 
-    for index in range(state.phase, len(cfg.phases)):
-        phase = cfg.phases[index]
-        phase_end = phase_start + phase.timesteps
-        venv = vec_env(cfg, phase.backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
-        fresh = model is None and not resume
-        model = _phase_model(model, cfg, venv, out)
-        if fresh and cfg.imitation is not None:
-            warm_start(model, cfg, progress)
+    try:
+        for index in range(state.phase, len(cfg.phases)):
+            phase = cfg.phases[index]
+            phase_end = phase_start + phase.timesteps
+            venv = vec_env(cfg, phase.backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
+            first = model is None
+            model = _phase_model(model, cfg, venv)
+            if first and resume:
+                resumed = restore(model, out / "last")  # mid-phase: the running episodes too
+                if not resumed.live and index > 0:
+                    # a later phase's environments start from their seed, as in an
+                    # uninterrupted run (PPO's constructor must not reseed them)
+                    seed = cfg.seed * 1000 + index * 100
+                    venv.unwrapped.set_random_state(np.random.RandomState(seed))
+            if first:
+                logger = run_logger(out / TENSORBOARD_DIR, model.num_timesteps + 1 if resume else 0)
+                model.set_logger(logger)
+                if resume:
+                    logger.record("run/resumed", f"resumed at step {model.num_timesteps:,}")
+                else:
+                    log_run_start(logger, cfg)
+                    if cfg.imitation is not None:
+                        lines = warm_start(model, cfg, console.enabled)
+                        logger.record("run/imitation", "\n\n".join(lines))
+                        checkpoint(model)
+            assert logger is not None
+            if not (first and resumed is not None and resumed.live):  # the phase starts
+                record_phase_start(logger, cfg, index, model.num_timesteps)
+            console.phase(index, model.num_timesteps)
+            if phase_end - model.num_timesteps > 0:
+                callbacks = [
+                    MissionLoggerCallback(model.num_timesteps, phase=index + 1),
+                    EvalCheckpointCallback(
+                        cfg.eval_every_steps,
+                        phase_end,
+                        model.num_timesteps,
+                        checkpoint,
+                        console.steps,
+                    ),
+                ]
+                # SB3 counts the schedule over num_timesteps / (num_timesteps + remaining);
+                # the total must span all phases, so learn() is told the overall end (the
+                # callback ends the phase).
+                model.learn(
+                    total_timesteps=cfg.total_timesteps - model.num_timesteps,
+                    reset_num_timesteps=False,
+                    callback=callbacks,
+                    progress_bar=False,
+                )
+            state.phase = index + 1
             checkpoint(model)
-        if resume and resumed is None:
-            resumed = restore(model, out / "last")  # mid-phase: the running episodes too
-            if not resumed.live and index > 0:
-                # a later phase's environments start from their seed, as in an uninterrupted
-                # run (PPO's constructor must not reseed them)
-                seed = cfg.seed * 1000 + index * 100
-                venv.unwrapped.set_random_state(np.random.RandomState(seed))
-        if phase_end - model.num_timesteps > 0:
-            callbacks = [
-                MissionLoggerCallback(model.num_timesteps),
-                EvalCheckpointCallback(
-                    cfg.eval_every_steps, phase_end, model.num_timesteps, checkpoint, progress_to
-                ),
-            ]
-            # SB3 counts the schedule over num_timesteps / (num_timesteps + remaining); the
-            # total must span all phases, so learn() is told the overall end (the callback
-            # ends the phase).
-            model.learn(
-                total_timesteps=cfg.total_timesteps - model.num_timesteps,
-                reset_num_timesteps=False,
-                callback=callbacks,
-                tb_log_name="ppo",
-                progress_bar=False,
-            )
-        state.phase = index + 1
-        checkpoint(model)
-        phase_start = phase_end
-    bar.close()
-    if model is not None:
-        model.get_env().close()
-    return state
+            phase_start = phase_end
+    finally:
+        if logger is not None:
+            logger.close()
+        if model is not None:
+            model.get_env().close()
+
+
+def _phase_of(entry: dict[str, Any]) -> str:
+    """The phase of a history entry as "1 of 2 (kinematic)" (the backend alone for an entry
+    of a run begun before entries named their phase from 1)."""
+    if "phases" not in entry:
+        return str(entry["backend"])
+    return f"{entry['phase']} of {entry['phases']} ({entry['backend']})"
+
+
+def run_summary(cfg: TrainConfig, out: Path, state: RunState) -> dict[str, Any]:
+    """What a finished run hands its researcher: the best checkpoint (the one model selection
+    kept: its folder, step, phase and evaluation) and the last, with the phases done."""
+    described = {"num_timesteps", "phase", "phases", "backend"}
+
+    def checkpoint(folder: str, entry: dict[str, Any]) -> dict[str, Any]:
+        return {
+            "checkpoint": str(out / folder),
+            "num_timesteps": entry["num_timesteps"],
+            "phase": _phase_of(entry),
+            "eval": {k: v for k, v in entry.items() if k not in described},
+        }
+
+    summary: dict[str, Any] = {
+        "out": str(out),
+        "num_timesteps": state.num_timesteps,
+        "phases_done": f"{state.phase} of {len(cfg.phases)}",
+    }
+    if state.history:
+        scores = [selection_score(e) for e in state.history]
+        best = state.history[scores.index(max(scores))]  # the first best, as training kept it
+        summary["best"] = checkpoint("best", best)
+        summary["last"] = checkpoint("last", state.history[-1])
+    return summary
