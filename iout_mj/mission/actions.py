@@ -62,6 +62,11 @@ class ActionMap(native.Frozen):
             raise ActionError(
                 f"action {a.tolist()} has non-integer entries; accepted integer indices"
             )
+        if a.dtype.kind in "fu" and np.abs(a.astype(np.float64)).max(initial=0.0) >= 2.0**63:
+            raise ActionError(
+                f"action {a.tolist()} has entries beyond any index; accepted integer indices "
+                f"from 0 to {int(self.high.max()) - 1}"
+            )
         return np.asarray(a, dtype=np.int64).reshape(*self.batch, self.n_auvs, 4)
 
     def spec(self) -> specs.BoundedArray:
