@@ -9,8 +9,12 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 
+from iout_mj.agents.policies import load_policy
+from iout_mj.backends.mujoco import overlay
+from iout_mj.backends.mujoco.render import Z_NODE_M
+from iout_mj.envs import ENV_ID
 from iout_mj.experiments.mission import run_mission
-from iout_mj.scenarios import make_config
+from iout_mj.scenarios import make_config, resolve
 
 pytestmark = pytest.mark.slow
 
@@ -91,12 +95,56 @@ def test_missing_gl_library_gives_the_documented_message():
 
 
 def test_render_command(tmp_path, cli):
-    clip = tmp_path / "clip.mp4"
     out = cli(
         *("render", "--policy", "greedy", "--slots", "2", "--width", "320", "--height", "180"),
-        *("--fps", "10", "--out", clip),
+        *("--fps", "10", "--out", tmp_path),
     )
     assert "17 frames" in out.stdout
-    assert clip.stat().st_size > 1000 and clip.with_suffix(".png").exists()
-    bad = cli("render", "--out", tmp_path / "clip.gif", check=False)
-    assert bad.returncode == 2 and "accepted a path ending in .mp4" in bad.stderr
+    assert (tmp_path / "mission.mp4").stat().st_size > 1000
+    assert (tmp_path / "mission.png").exists()
+    bad = cli("render", "--out", tmp_path / "clip.mp4", check=False)
+    assert bad.returncode == 2 and "accepted a folder" in bad.stderr
+
+
+def test_frame_panel_labels_and_chase_camera_at_960x540():
+    """N = 4: AUV 1 docks first; the chase camera moves on to an AUV under way, the panel
+    (beside the map, text on it) says where AUV 1 docked, node labels sit on the nodes."""
+    env = gym.make(
+        ENV_ID,
+        backend="kinematic",
+        config=resolve(None, 4, 9),
+        render_mode="rgb_array",
+        width=960,
+        height=540,
+    )
+    obs, _ = env.reset(seed=0)
+    policy = load_policy("tour-scheduler", env, 0)
+    policy.reset(0)
+    env.render()
+    mission, renderer = env.unwrapped.mission, env.unwrapped.renderer
+    while not mission.state.docked[0]:
+        obs, *_ = env.step(policy(env, obs))
+    assert not mission.state.docked.all()
+    docked_slot = int(mission.state.slot)
+    assert renderer.docked_at[0] == docked_slot
+    assert renderer.chased > 0 and not mission.state.docked[renderer.chased]
+    frame = env.render()
+    lay = renderer.layout
+    panel = frame[lay.chase_h :, lay.map_w :].reshape(-1, 3)
+    background = np.all(panel == overlay.PANEL_RGB, axis=1).mean()
+    text = np.all(panel > 200, axis=1).mean()
+    assert background > 0.6 and text > 0.01  # a dark panel with light text on it
+    chase = frame[: lay.chase_h, lay.map_w :].reshape(-1, 3)
+    assert np.all(chase == overlay.PANEL_RGB, axis=1).mean() < 0.05  # a rendered view
+    state = renderer._panel_state()
+    assert state.aoi_so_far == mission.metrics()["mean_aoi"]
+    lines = overlay.Panel(lay.side_w, lay.panel_h, state).lines(state)
+    assert f"AUV 1  {state.energy_kj[0]:.0f} kJ,  docked at slot {docked_slot}" in lines
+    cam, d = renderer._top_cam, renderer._view_data
+    nodes = np.column_stack([mission.network.nodes_m, np.full(mission.n_nodes, Z_NODE_M)])
+    px = overlay.project(
+        nodes, d.cam_xpos[cam], d.cam_xmat[cam], renderer.model.cam_fovy[cam], 540, 540
+    )
+    centres = frame[px[:, 1].round().astype(int), px[:, 0].round().astype(int)].astype(int)
+    assert np.all(centres[:, 1] > 200) and np.all(centres[:, 1] > centres[:, [0, 2]].max(1))
+    env.close()
