@@ -1,7 +1,13 @@
-"""Figures from missions and evaluation results (matplotlib, Agg backend)."""
+"""Figures from missions and evaluation results (matplotlib, Agg backend).
+
+Every results figure is titled with its condition (noise model and current when the results
+record them, backend, layout, episodes per cell); error bars are 95 % confidence intervals of
+the mean over episodes (Student t), clipped to the measure's range.
+"""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -10,6 +16,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator
 
 from iout_mj import palette
 from iout_mj.errors import ResultFileError
@@ -26,6 +34,16 @@ from iout_mj.experiments.result_files import (
 
 MEASURES = ("jain", "mean_aoi", "propulsion_energy_j")
 """What the results figures plot from each evaluation row."""
+T_975 = (
+    *(12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228),
+    *(2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086),
+    *(2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042),
+)
+"""Student's t 97.5 % quantile for 1 to 30 degrees of freedom."""
+N_STYLES = ("-", "--", ":", "-.")
+N_MARKERS = ("o", "s", "^", "D")
+"""Line style and marker of N = 1, 2, 3, 4 AUVs (then again): N is told apart without colour."""
+CI_NOTE = "error bars: 95 % CI of the mean over episodes (Student t)"
 
 
 def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: Any = None) -> None:
@@ -52,10 +70,24 @@ def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: An
         ax.plot(pos[-1, i, 0], pos[-1, i, 1], "s", color=c, ms=5)
     nodes = np.array(trace["nodes_m"])
     bits = np.array(trace["delivered_bits_per_node"]) / 1e6
-    ax.scatter(nodes[:, 0], nodes[:, 1], s=60, c="tab:blue", marker="^", zorder=3, label="nodes")
+    ax.scatter(
+        nodes[:, 0],
+        nodes[:, 1],
+        s=60,
+        color=palette.NODE_RGB,
+        edgecolors="black",
+        marker="^",
+        zorder=3,
+        label="nodes",
+    )
     for k, (x, y) in enumerate(nodes):
         ax.annotate(
-            f"{bits[k]:.1f} Mbit", (x, y), textcoords="offset points", xytext=(5, 6), fontsize=7
+            f"{bits[k]:.1f} Mbit",
+            (x, y),
+            textcoords="offset points",
+            xytext=(5, 6),
+            fontsize=7,
+            color="white",
         )
     ax.set(
         xlim=(0, trace["area_m"][0]),
@@ -65,6 +97,7 @@ def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: An
         title=title,
         aspect="equal",
     )
+    ax.set_facecolor(palette.SEABED_RGB)  # the video's seabed: every AUV colour shows on it
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
     if own:
@@ -74,9 +107,13 @@ def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: An
         plt.close(fig)
 
 
-def speed_heading_figure(traces: dict[str, dict[str, Any]], path: Path) -> None:
+def speed_heading_figure(
+    traces: dict[str, dict[str, Any]], path: Path, condition: str = ""
+) -> None:
     """Heading and speed of AUV 1 over time for each named trace (paper Fig. 4)."""
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.9))
+    if condition:
+        fig.suptitle(f"Heading and speed, N = 1 (paper Fig. 4); {condition}", fontsize=10)
     for label, tr in traces.items():
         t = np.arange(len(tr["speeds_mps"])) * tr["slot_s"]
         axes[0].plot(t, np.degrees(np.unwrap(np.array(tr["headings_rad"])[:, 0])), label=label)
@@ -91,8 +128,9 @@ def speed_heading_figure(traces: dict[str, dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def figures_from_results(results: Path, out: Path) -> list[Path]:
-    """All figures from a folder written by `iout-mj evaluate --out`.
+def figures_from_results(results: Path, out: Path, skipped: list[str] | None = None) -> list[Path]:
+    """Every figure a folder written by `iout-mj evaluate --out` allows; each one it cannot
+    draw is said in `skipped`, with the reason.
 
     Raises:
         ResultFileError: results.json or traces.json is missing a key, holds a non-finite
@@ -100,29 +138,59 @@ def figures_from_results(results: Path, out: Path) -> list[Path]:
     """
     hint = f"run `iout-mj evaluate --out {results}` first"
     rows = read_rows(results / "results.json", ("policy",), MEASURES, hint)
+    for i, row in enumerate(rows):
+        integer(row, "episodes", f"{results / 'results.json'}: row {i}", 1)
     traces_path = results / "traces.json"
     traces = read_traces(traces_path) if traces_path.exists() else {}
+    notes = skipped if skipped is not None else []
     paths = results_figures(rows, out)
-    if traces:
-        cols = min(4, len(traces))
-        lines = -(-len(traces) // cols)
-        fig, axes = plt.subplots(lines, cols, figsize=(4.4 * cols, 4.6 * lines), squeeze=False)
-        for ax in axes.ravel()[len(traces) :]:
-            ax.set_visible(False)
-        for ax, (label, tr) in zip(axes.ravel(), sorted(traces.items()), strict=False):
-            trajectory_figure(tr, out, title=label, ax=ax)
-        fig.suptitle("Trajectories and data collected per node, K = 7 (paper Fig. 3)")
-        fig.tight_layout()
-        p = out / "fig3_trajectories_k7.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
+    cond = condition(rows)
+    if not traces:
+        why = (
+            f"{traces_path} is missing"
+            if not traces_path.exists()
+            else f"{traces_path} holds no trajectory"
+        )
+        notes.append(
+            f"skipped Fig. 3 (trajectories) and Fig. 4 (speed and heading): {why}; evaluate "
+            "keeps the first episode of each K = 7 cell, or of a config's own nodes"
+        )
+        return paths
+    paths.append(trajectories_figure(traces, out, cond))
+    single = {k: v for k, v in traces.items() if k.endswith("N=1")}
+    if single:
+        p = out / "fig4_speed_heading_n1.png"
+        speed_heading_figure(single, p, cond)
         paths.append(p)
-        single = {k: v for k, v in traces.items() if k.endswith("N=1")}
-        if single:
-            p = out / "fig4_speed_heading_n1.png"
-            speed_heading_figure(single, p)
-            paths.append(p)
+    else:
+        notes.append(
+            "skipped Fig. 4 (speed and heading, N = 1): no trajectory with N = 1 in "
+            f"{traces_path} (evaluate with --n-auvs 1)"
+        )
     return paths
+
+
+def trajectories_figure(traces: dict[str, dict[str, Any]], out: Path, cond: str) -> Path:
+    """One trajectory map per trace (paper Fig. 3), named by the traces' K."""
+    ks = sorted({len(tr["nodes_m"]) for tr in traces.values()})
+    cols = min(4, len(traces))
+    lines = -(-len(traces) // cols)
+    fig, axes = plt.subplots(lines, cols, figsize=(4.4 * cols, 4.6 * lines + 0.5), squeeze=False)
+    for ax in axes.ravel()[len(traces) :]:
+        ax.set_visible(False)
+    for ax, (label, tr) in zip(axes.ravel(), sorted(traces.items()), strict=False):
+        trajectory_figure(tr, out, title=label, ax=ax)
+    k_text = ", ".join(str(k) for k in ks)
+    fig.suptitle(
+        f"Trajectories and data collected per node, K = {k_text} (paper Fig. 3): the first "
+        f"episode of each cell\n{cond}",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    p = out / (f"fig3_trajectories_k{ks[0]}.png" if len(ks) == 1 else "fig3_trajectories.png")
+    fig.savefig(p, dpi=90)
+    plt.close(fig)
+    return p
 
 
 def read_traces(path: Path) -> dict[str, dict[str, Any]]:
@@ -195,48 +263,152 @@ def training_curves(runs: list[Path], path: Path) -> Path:
     return path
 
 
+def ci95(mean: float, std: float, n: int, low: float, high: float) -> tuple[float, float]:
+    """The lower and upper error bar lengths of a 95 % CI of a mean over `n` episodes whose
+    population standard deviation is `std` (evaluate's `_std`): t(n - 1) s / sqrt(n) with s the
+    sample deviation, clipped to the measure's range [low, high]; none for one episode."""
+    if n < 2:
+        return 0.0, 0.0
+    df = n - 1
+    t = T_975[df - 1] if df <= len(T_975) else 1.96 + 2.4 / df
+    half = t * std / math.sqrt(df)
+    return min(half, max(mean - low, 0.0)), min(half, max(high - mean, 0.0))
+
+
+def _values(rows: list[dict[str, Any]], key: str) -> list[Any]:
+    return sorted({r[key] for r in rows if key in r})
+
+
+def condition(rows: list[dict[str, Any]]) -> str:
+    """The condition of an evaluation, from its rows: noise model and current (when the rows
+    record them), backend, layout and episodes per cell."""
+    noise = _values(rows, "noise_model")
+    parts = [
+        " / ".join({"wenz": "Wenz"}.get(n, n) for n in noise) + " noise"
+        if noise
+        else "noise model not recorded"
+    ]
+    current = _values(rows, "max_current_mps")
+    if current:
+        top = max(current)
+        parts.append(f"current up to {top:.2g} m/s" if top > 0 else "no current")
+    backends = _values(rows, "backend")
+    parts.append(" / ".join({"mujoco": "MuJoCo"}.get(b, b) for b in backends) + " backend")
+    layouts = {"paper": "paper layouts", "random": "random layouts", "custom": "own nodes"}
+    parts.append(" / ".join(layouts.get(x, x) for x in _values(rows, "layout")))
+    episodes = _values(rows, "episodes")
+    span = str(episodes[0]) if len(episodes) == 1 else f"{episodes[0]}-{episodes[-1]}"
+    parts.append(f"{span} episodes per cell")
+    return ", ".join(parts)
+
+
+def condition_suffix(rows: list[dict[str, Any]]) -> str:
+    """The figure file names' suffix: "_flat", "_wenz" (and "_current" with a current), or ""
+    when the rows do not record the noise model."""
+    noise = _values(rows, "noise_model")
+    if not noise:
+        return ""
+    current = max(_values(rows, "max_current_mps") or [0.0]) > 0
+    return "_" + "-".join(noise) + ("_current" if current else "")
+
+
+def vs_k_figure(
+    rows: list[dict[str, Any]], key: str, ylabel: str, title: str, high: float, path: Path
+) -> Path:
+    """`key` against K: a colour per policy, a line style and marker per N, 95 % CIs."""
+    policies, ns = _values(rows, "policy"), _values(rows, "n_auvs")
+    ks = _values(rows, "n_nodes")
+    series = [(p, n) for p in policies for n in ns]
+    dodge = 0.04 * (min(np.diff(ks)) if len(ks) > 1 else 1.0)  # error bars side by side
+    fig, ax = plt.subplots(figsize=(8.4, 4.6))
+    for j, (policy, n) in enumerate(series):
+        sel = sorted(
+            (r for r in rows if r["policy"] == policy and r["n_auvs"] == n),
+            key=lambda r: r["n_nodes"],
+        )
+        if not sel:
+            continue
+        bars = np.array([ci95(r[key], r[key + "_std"], r["episodes"], 0.0, high) for r in sel])
+        ni = ns.index(n)
+        ax.errorbar(
+            [r["n_nodes"] + dodge * (j - (len(series) - 1) / 2) for r in sel],
+            [r[key] for r in sel],
+            yerr=bars.T,
+            color=f"C{policies.index(policy)}",
+            ls=N_STYLES[ni % len(N_STYLES)],
+            marker=N_MARKERS[ni % len(N_MARKERS)],
+            ms=5,
+            capsize=3,
+        )
+    if len(ks) <= 12:
+        ax.set_xticks(ks)  # the K evaluated
+    else:
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set(xlabel="number of nodes K", ylabel=ylabel)
+    if high < math.inf:
+        ax.set_ylim(top=high + 0.02 * high)
+    ax.grid(alpha=0.3)
+    by_policy = [Line2D([], [], color=f"C{i}", lw=2.5, label=p) for i, p in enumerate(policies)]
+    by_n = [
+        Line2D(
+            [],
+            [],
+            color="black",
+            ls=N_STYLES[i % len(N_STYLES)],
+            marker=N_MARKERS[i % len(N_MARKERS)],
+            label=f"N = {n}",
+        )
+        for i, n in enumerate(ns)
+    ]
+    fig.legend(handles=by_policy, title="policy", loc="upper left", bbox_to_anchor=(0.78, 0.86))
+    fig.legend(handles=by_n, title="AUVs", loc="lower left", bbox_to_anchor=(0.78, 0.16))
+    ax.set_title(f"{title}\n{condition(rows)}", fontsize=9)
+    fig.text(0.01, 0.01, CI_NOTE + (", clipped to [0, 1]" if high == 1.0 else ""), fontsize=7)
+    fig.subplots_adjust(left=0.1, right=0.76, top=0.86, bottom=0.16)  # legends at the right
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+    return path
+
+
 def results_figures(rows: list[dict[str, Any]], out: Path) -> list[Path]:
-    """Jain and mean AoI vs K per policy and N (paper Fig. 2), energy per policy."""
+    """Jain and mean AoI vs K per policy and N (paper Fig. 2), energy per policy; the file
+    names carry the noise model (`condition_suffix`)."""
     out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for key, ylabel, fname in (
-        ("jain", "Jain's fairness index", "fig2a_jain_vs_k.png"),
-        ("mean_aoi", "mean AoI (slots)", "fig2b_aoi_vs_k.png"),
-    ):
-        fig, ax = plt.subplots(figsize=(5, 3.8))
-        for policy, n in sorted({(r["policy"], r["n_auvs"]) for r in rows}):
-            sel = sorted(
-                (r for r in rows if r["policy"] == policy and r["n_auvs"] == n),
-                key=lambda r: r["n_nodes"],
-            )
-            k = [r["n_nodes"] for r in sel]
-            ax.errorbar(
-                k,
-                [r[key] for r in sel],
-                yerr=[r[key + "_std"] for r in sel],
-                marker="o",
-                capsize=3,
-                label=f"{policy}, N={n}",
-            )
-        ax.set(xlabel="number of nodes K", ylabel=ylabel)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        p = out / fname
-        fig.savefig(p, dpi=150)
-        plt.close(fig)
-        paths.append(p)
-    fig, ax = plt.subplots(figsize=(6, 3.6))
+    tail = condition_suffix(rows)
+    paths = [
+        vs_k_figure(
+            rows,
+            "jain",
+            "Jain's fairness index",
+            "Jain's fairness index vs K (paper Fig. 2a)",
+            1.0,
+            out / f"fig2a_jain_vs_k{tail}.png",
+        ),
+        vs_k_figure(
+            rows,
+            "mean_aoi",
+            "mean AoI until the mission ends (slots)",
+            "Mean AoI vs K (paper Fig. 2b)",
+            math.inf,
+            out / f"fig2b_aoi_vs_k{tail}.png",
+        ),
+    ]
+    fig, ax = plt.subplots(figsize=(7, 4))
     labels = sorted({(r["policy"], r["n_auvs"]) for r in rows})
     energy = [
         np.mean([r["propulsion_energy_j"] for r in rows if (r["policy"], r["n_auvs"]) == lab]) / 1e3
         for lab in labels
     ]
+    ks = ", ".join(str(k) for k in _values(rows, "n_nodes"))
     ax.bar([f"{p}\nN={n}" for p, n in labels], energy, color="tab:gray")
-    ax.set(ylabel="propulsion energy per AUV (kJ)", title="Propulsion energy (mean over K)")
+    ax.set(
+        ylabel="propulsion energy per AUV (kJ)",
+        title=f"Propulsion energy per AUV, mean over K = {ks}\n{condition(rows)}",
+    )
+    ax.title.set_fontsize(9)
     ax.tick_params(axis="x", labelsize=7)
     fig.tight_layout()
-    p = out / "energy_per_policy.png"
+    p = out / f"energy_per_policy{tail}.png"
     fig.savefig(p, dpi=150)
     plt.close(fig)
     paths.append(p)
@@ -244,30 +416,57 @@ def results_figures(rows: list[dict[str, Any]], out: Path) -> list[Path]:
 
 
 def energy_validation_figure(result: dict[str, Any], traces: list, path: Path) -> None:
-    """Steady-state power vs speed, and per-slot energy of the manoeuvres (validate-energy)."""
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    """Steady-state power vs speed, per-slot energy of the short manoeuvres, and of a whole
+    mission (validate-energy's traces: (name, run) pairs, a mission's name starting with
+    "mission"); measured (MuJoCo) solid, the paper's model dashed."""
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5.6), width_ratios=(1, 1.15, 1.15))
     steady = result["steady"]
     v = [r["speed_mps"] for r in steady]
     axes[0].plot(v, [r["model_power_w"] for r in steady], "-", label="paper model (cubic)")
     axes[0].plot(v, [r["measured_power_w"] for r in steady], "o", label="MuJoCo, measured")
     axes[0].set(
-        xlabel="speed (m/s)", ylabel="electrical power (W)", title="Steady state: power vs speed"
+        xlabel="speed (m/s)",
+        ylabel="electrical power (W)",
+        title="(a) Steady state: power vs speed",
     )
-    axes[0].legend()
-    axes[0].grid(alpha=0.3)
-    ax = axes[1]
-    for i, (name, r) in enumerate(traces):
-        slots = np.arange(1, len(r["measured_j"]) + 1)
-        line = ax.plot(slots, r["measured_j"] / 1e3, "-", color=f"C{i}", label=f"{name}")
-        ax.plot(slots, r["model_j"] / 1e3, "--", color=line[0].get_color())
-    ax.set(
-        xlabel="slot",
-        ylabel="energy per slot (kJ)",
-        title="Manoeuvres: measured (solid) vs model (dashed)",
+    axes[0].legend(fontsize=8)
+    short = [(n, r) for n, r in traces if not n.startswith("mission")]
+    whole = [(n, r) for n, r in traces if n.startswith("mission")]
+    panels = (
+        (axes[1], short, "(b) Manoeuvres: energy per slot", 0),
+        (axes[2], whole, "(c) A whole mission: energy per slot", len(short)),
     )
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
+    style = [
+        Line2D([], [], color="black", ls="-", label="MuJoCo, measured"),
+        Line2D([], [], color="black", ls="--", label="paper model (eq. 13)"),
+    ]
+    for ax, runs, title, first in panels:
+        for i, (name, r) in enumerate(runs):
+            slots = np.arange(1, len(r["measured_j"]) + 1)
+            color = f"C{first + i}"
+            ax.plot(slots, r["measured_j"] / 1e3, "-", color=color, label=name)
+            ax.plot(slots, r["model_j"] / 1e3, "--", color=color)
+        ax.set(xlabel="slot", ylabel="energy per slot (kJ)", title=title)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        handles = [*ax.get_legend_handles_labels()[0], *style]
+        ax.legend(
+            handles=handles,
+            fontsize=7,
+            title="colour: manoeuvre; line style: measured or model",
+            title_fontsize=8,
+            loc="upper center",
+            bbox_to_anchor=(0.5, -0.16),
+            ncol=2,
+        )
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    dt = result.get("timestep", {}).get("configured_dt_s")
+    fig.suptitle(
+        "Cubic propulsion model (paper) vs MuJoCo-measured energy, one AUV"
+        + (f", dt = {dt:g} s" if dt is not None else ""),
+        fontsize=11,
+    )
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
