@@ -224,10 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
         "sweep", help="Ray Tune trials over scenarios x seeds x hyperparameters", **fmt
     )
     p.add_argument(
-        "--config",
-        required=True,
-        help="sweep YAML: base, grid, cpus_per_trial, "
-        "metric, mode (see training/configs/sweep-smoke.yaml)",
+        "sweep_config",
+        help="sweep YAML: base, grid, cpus_per_trial, metric, mode (see "
+        "training/configs/sweep-smoke.yaml)",
     )
     p.add_argument("--out", default="runs/sweep", help="folder for the trials, results, best.yaml")
     p.add_argument(
@@ -242,8 +241,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func="cmd_sweep")
 
     p = sub.add_parser("train", help="PPO on a scenario (YAML config); checkpoints, resume", **fmt)
-    p.add_argument("--config", required=True, help="training/configs/<name>.yaml")
-    p.add_argument("--out", help="run folder (default: runs/<name>)")
+    p.add_argument("train_config", help="the training config, training/configs/<name>.yaml")
+    p.add_argument(
+        "--config",
+        help="YAML/JSON env config instead of the training config's env: (nodes, current, "
+        "noise, reward, ...)",
+    )
+    p.add_argument("--out", help="run folder (default: runs/<name>, runs/<name>-seed<S>)")
     p.add_argument("--resume", action="store_true", help="continue the run in <out>")
     p.add_argument(
         "--overwrite", action="store_true", help="replace the run already in <out> (not resumed)"
@@ -261,10 +265,6 @@ def build_parser() -> argparse.ArgumentParser:
         "--steps",
         type=int_at_least(1),
         help="total PPO steps instead of the config's (its phases scaled to them)",
-    )
-    p.add_argument(
-        "--env-config",
-        help="YAML/JSON env config instead of the config's env: (nodes, current, noise, ...)",
     )
     p.set_defaults(func="cmd_train")
 

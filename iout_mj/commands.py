@@ -196,21 +196,23 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     from iout_mj.training import TrainConfig, train  # heavy: see the module docstring
+    from iout_mj.training.trainer import run_summary
 
-    cfg = TrainConfig.load(args.config)
+    cfg = TrainConfig.load(args.train_config)
     name = cfg.name
     if args.seed is not None:
         name = f"{cfg.name}-seed{args.seed}"
     cfg = train_overrides(cfg, args)
     out = writable_dir(Path(args.out or f"runs/{name}"))
     with output_lock(out, "train"):
-        state = train(cfg, out, resume=args.resume, overwrite=args.overwrite)
-    summary = {
-        "out": str(out),
-        "num_timesteps": state.num_timesteps,
-        "last_eval": state.history[-1] if state.history else None,
-    }
-    print(json.dumps(summary, indent=2))
+        try:
+            state = train(
+                cfg, out, resume=args.resume, overwrite=args.overwrite, progress=not args.quiet
+            )
+        except KeyboardInterrupt:
+            print(f"iout-mj train: stopped; resume with --resume --out {out}", file=sys.stderr)
+            raise
+    print(json.dumps(run_summary(cfg, out, state), indent=2))
     return 0
 
 
@@ -220,7 +222,7 @@ def train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
     from iout_mj.scenarios import read_nodes
 
     changes: dict[str, Any] = {}
-    env = load_config(args.env_config) if args.env_config is not None else cfg.env
+    env = load_config(args.config) if args.config is not None else cfg.env
     if args.nodes_file is not None:
         scenario = dataclasses.replace(env.scenario, nodes_m=read_nodes(args.nodes_file))
         env = env.replace(scenario=scenario)
@@ -303,7 +305,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     out = writable_dir(Path(args.out))
     with output_lock(out, "sweep"):
-        result = ray_jobs.sweep(args.config, out, args.ray, args.ray_timeout)
+        result = ray_jobs.sweep(args.sweep_config, out, args.ray, args.ray_timeout)
     print(json.dumps(result, indent=2))
     return 0
 

@@ -325,7 +325,7 @@ def test_a_busy_output_folder_is_refused_at_once(tmp_path):
             ("evaluate", "--policy", "greedy", "--episodes", "1", "--backend", "kinematic"),
             ("mission", "--no-video", "--slots", "1"),
             ("figures", "--results", tmp_path),
-            ("train", "--config", ROOT / "training" / "configs" / "smoke.yaml"),
+            ("train", ROOT / "training" / "configs" / "smoke.yaml"),
         ):
             out = run(*args, "--out", tmp_path, check=False)
             assert out.returncode == 2 and f"{tmp_path} is in use by iout-mj evaluate" in (

@@ -146,11 +146,10 @@ def test_general_pipeline_trains_saves_and_flies_any_k(tmp_path, cli):
     env_config = ROOT / "training/configs/env/wenz-current.yaml"
     cli(
         "train",
-        "--config",
         ROOT / "training/configs/smoke-general.yaml",
         "--out",
         out,
-        "--env-config",
+        "--config",
         env_config,
         "--layout",
         "random",

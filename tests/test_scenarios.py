@@ -133,7 +133,6 @@ def test_your_own_network_end_to_end_from_a_csv(tmp_path, cli):
     run = tmp_path / "run"
     cli(
         "train",
-        "--config",
         "training/configs/smoke.yaml",
         "--nodes-file",
         nodes,

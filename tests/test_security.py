@@ -84,7 +84,7 @@ def test_every_loading_path_refuses_a_pickled_policy(malicious, cli, tmp_path):
     for name in ("model.zip", "vecnormalize.pkl"):
         shutil.copy(folder / name, run / "last" / name)
     (run / "config.yaml").write_text("name: t\nn_auvs: 1\n")
-    out = cli("train", "--config", run / "config.yaml", "--out", run, "--resume", check=False)
+    out = cli("train", run / "config.yaml", "--out", run, "--resume", check=False)
     assert out.returncode == 2 and "no complete last/ checkpoint" in out.stderr
     assert not marker.exists()
 

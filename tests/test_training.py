@@ -102,10 +102,10 @@ def test_killed_and_resumed_run_ends_with_the_uninterrupted_weights(tmp_path, cl
         eval_episodes=1,
     )
     config.write_text(yaml.safe_dump(cfg.to_dict()))
-    cli("train", "--config", config, "--out", tmp_path / "whole")
+    cli("train", config, "--out", tmp_path / "whole")
     run = tmp_path / "killed"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "iout_mj.cli", "train", "--config", config, "--out", run],
+        [sys.executable, "-m", "iout_mj.cli", "train", config, "--out", run],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -122,7 +122,7 @@ def test_killed_and_resumed_run_ends_with_the_uninterrupted_weights(tmp_path, cl
         not (run / "state.json").is_file()
         or json.loads((run / "state.json").read_text())["phase"] == 1
     )
-    cli("train", "--config", config, "--out", run, "--resume")
+    cli("train", config, "--out", run, "--resume")
     whole, resumed = weights(tmp_path / "whole" / "last"), weights(run / "last")
     assert set(whole) == set(resumed)
     for key in whole:
@@ -147,10 +147,10 @@ def test_policy_for_other_scenario_is_refused(tmp_path):
 def test_train_cli_rejects_bad_configs(tmp_path, cli):
     bad = tmp_path / "bad.yaml"
     bad.write_text("n_envs: 2\nn_steps: 10\nbatch_size: 7\n")
-    out = cli("train", "--config", bad, "--out", tmp_path / "r", check=False)
+    out = cli("train", bad, "--out", tmp_path / "r", check=False)
     assert out.returncode == 2 and "batch_size=7 must divide" in out.stderr
     bad.write_text("learning_rat: 0.1\n")
-    out = cli("train", "--config", bad, check=False)
+    out = cli("train", bad, check=False)
     assert out.returncode == 2 and "unknown key" in out.stderr
 
 
