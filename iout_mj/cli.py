@@ -82,7 +82,9 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
         help="AUVs N, 1 to 4 (default: the config file's, else 2)",
     )
     p.add_argument(
+        "--n-nodes",
         "--nodes",
+        dest="nodes",
         type=int_at_least(2),
         default=None,
         help="sensor nodes K, 2 to 30: the paper's layout for 7 and 13, else one seeded layout "
@@ -183,7 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="AUVs N (default: the config's N if it sets one, else 1 2)",
     )
     p.add_argument(
+        "--n-nodes",
         "--nodes",
+        dest="nodes",
         type=int_at_least(2),
         nargs="+",
         default=None,
@@ -259,7 +263,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--layout", choices=LAYOUTS, help="node layout instead of the config's")
     p.add_argument("--n-auvs", type=int_at_least(1), help="AUVs N instead of the config's")
-    p.add_argument("--nodes", type=int_at_least(2), help="nodes K instead of the config's")
+    p.add_argument(
+        "--n-nodes",
+        "--nodes",
+        dest="nodes",
+        type=int_at_least(2),
+        help="nodes K instead of the config's",
+    )
     p.add_argument("--nodes-file", help=NODES_FILE_HELP + ", instead of the config's nodes")
     p.add_argument(
         "--steps",
