@@ -81,11 +81,13 @@ def trajectory_figure(trace: dict[str, Any], path: Path, title: str = "", ax: An
         label="nodes",
     )
     for k, (x, y) in enumerate(nodes):
+        right = x > 0.8 * trace["area_m"][0]  # written leftwards, inside the map
         ax.annotate(
             f"{bits[k]:.1f} Mbit",
             (x, y),
             textcoords="offset points",
-            xytext=(5, 6),
+            xytext=(-5 if right else 5, 6),
+            ha="right" if right else "left",
             fontsize=7,
             color="white",
         )
