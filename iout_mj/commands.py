@@ -186,8 +186,11 @@ def cmd_figures(args: argparse.Namespace) -> int:
     out = writable_dir(Path(args.out or args.results or "renders"))
     with output_lock(out, "figures"):
         if args.results:
-            for path in figures.figures_from_results(Path(args.results), out):
+            skipped: list[str] = []
+            for path in figures.figures_from_results(Path(args.results), out, skipped):
                 print(path)
+            for note in skipped:
+                print(note, file=sys.stderr)
         if args.runs:
             runs = [Path(r) for r in args.runs]
             print(figures.training_curves(runs, out / "training_curves.png"))

@@ -51,7 +51,7 @@ def test_well_formed_files_give_the_table_and_figures(results, tmp_path):
     (table,) = compare.compare(compare.read_rows(results), "ppo", "greedy")
     assert table["ratio"] == pytest.approx(11.0 / 20.0)
     names = [p.name for p in figures.figures_from_results(results, tmp_path / "png")]
-    assert "fig3_trajectories_k7.png" in names and "fig4_speed_heading_n1.png" in names
+    assert "fig3_trajectories_k2.png" in names and "fig4_speed_heading_n1.png" in names
     assert "| kinematic_steps_per_s N2_K13" in bench_report.format_markdown(
         bench_report.read_result(BENCH)
     )

@@ -83,6 +83,8 @@ def _episode(job: Job) -> dict[str, Any]:
         "layout": job.spec.layout,
         "seed": job.seed,
         "backend": job.spec.backend,
+        "noise_model": job.spec.config.acoustics.noise_model,
+        "max_current_mps": job.spec.config.physics.max_current_mps,
         **metrics,
     }
     if job.keep_trace:
@@ -143,6 +145,8 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "n_nodes": k,
             "layout": layout,
             "backend": backend,
+            "noise_model": eps[0]["noise_model"],
+            "max_current_mps": eps[0]["max_current_mps"],
             "episodes": len(eps),
         }
         for key in SUMMARY_KEYS:
