@@ -1,7 +1,9 @@
 """Train one parameter-shared PPO policy for every AUV on the PettingZoo env (SuperSuit ->
 stable-baselines3), then fly it on the MuJoCo backend beside the centralised `ppo-n2-k7`.
 
-    .venv/bin/python training/examples/pettingzoo_shared_ppo.py --steps 300000 --out runs/shared
+    .venv/bin/python training/examples/pettingzoo_shared_ppo.py --steps 600000 --out runs/shared
+
+600,000 agent steps are 300,000 joint steps of the 2 AUVs (the README's run).
 
 Each AUV acts on its own observation (`iout_mj.envs.parallel_env.agent_observations`) with the
 same network; the reward is the team's. Evaluation: 20 MuJoCo episodes, seeds 0-19, K = 7.
@@ -71,7 +73,7 @@ def evaluate(model: PPO, normalize: Normalizer, episodes: int) -> dict[str, floa
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--steps", type=int, default=300_000, help="agent steps of training")
+    parser.add_argument("--steps", type=int, default=600_000, help="agent steps of training")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--episodes", type=int, default=20, help="MuJoCo evaluation episodes")
     parser.add_argument("--out", default="runs/pettingzoo-shared", help="folder for result.json")

@@ -1,0 +1,147 @@
+"""Every `iout-mj` command of the README runs, in the order the README gives them, shortened
+for CI: one episode per cell on the kinematic model, a few slots of video, a smoke training
+of the same kind (`shortened` says exactly what changes). A `--resume` runs after the run it
+resumes; a training the README shows twice into one run folder starts it again (--overwrite)."""
+
+import re
+import shlex
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, run_cli
+
+pytestmark = pytest.mark.slow
+
+PLACEHOLDERS = ("DIR", "RUN")
+"""Commands the README gives as a pattern (`figures --results DIR`) are only parsed."""
+TRAININGS = {"ppo-general": "smoke-general.yaml", "ppo-": "smoke.yaml"}
+"""A README training config -> the smoke config of the same policy kind (tokens or MLP)."""
+
+
+def readme_commands() -> list[list[str]]:
+    """Every `iout-mj ...` of the README (inline, or a `.venv/bin/iout-mj` line), in order."""
+    text = (ROOT / "README.md").read_text()
+    pattern = r"`iout-mj ([^`]+)`|^\.venv/bin/iout-mj ([^#\n]+)"
+    found = [a or b for a, b in re.findall(pattern, text, flags=re.M)]
+    return [shlex.split(c) for c in found if "--help" not in c]
+
+
+def _option(argv: list[str], flag: str) -> int | None:
+    return argv.index(flag) if flag in argv else None
+
+
+def _values_end(argv: list[str], i: int) -> int:
+    j = i + 1
+    while j < len(argv) and not argv[j].startswith("--"):
+        j += 1
+    return j
+
+
+def shortened(argv: list[str]) -> list[str]:
+    """The same command with CI-sized counts: the kinematic model for evaluations, one episode
+    per cell and one K, 3 slots of a small video, 128 training steps of the smoke config of the
+    same kind (into the run folder the README's config would use), quick benchmarks."""
+    a = list(argv)
+    command = a[0]
+    i = _option(a, "--episodes")
+    if i is not None:
+        a[i + 1] = "1"
+    for flag in ("--nodes", "--n-nodes"):
+        i = _option(a, flag)
+        if i is not None:
+            del a[i + 2 : _values_end(a, i)]
+    if command == "evaluate":
+        i = _option(a, "--backend")
+        a = a[:i] + a[i + 2 :] if i is not None else a
+        a += (
+            ["--backend", "kinematic", "--episodes", "1"]
+            if "--episodes" not in a
+            else ["--backend", "kinematic"]
+        )
+    if command in ("mission", "render"):
+        i = _option(a, "--slots")
+        a = a[:i] + a[i + 2 :] if i is not None else a
+        a += ["--slots", "3"]
+        for flag, value in (("--width", "320"), ("--height", "180")):
+            i = _option(a, flag)
+            a = a[:i] + a[i + 2 :] if i is not None else a
+            a += [flag, value]
+    if command == "train":
+        config = a[1]
+        name = config.rsplit("/", 1)[-1].removesuffix(".yaml")
+        kind = next(v for k, v in TRAININGS.items() if name.startswith(k))
+        a[1] = f"training/configs/{kind}"
+        if "--out" not in a:
+            seed = a[_option(a, "--seed") + 1] if "--seed" in a else None
+            a += ["--out", f"runs/{name}" + (f"-seed{seed}" if seed else "")]
+        if "--steps" in a:
+            a[_option(a, "--steps") + 1] = "128"
+        else:
+            a += ["--steps", "128"]
+    if command == "bench":
+        if "--warp" in a:
+            pytest.importorskip("mujoco_warp")
+            i = _option(a, "--warp-sizes")
+            a = (a[:i] + a[_values_end(a, i) :]) if i is not None else a
+            a += ["--warp-sizes", "2"]
+        elif "--from-json" not in a:
+            a += ["--quick"]
+    return a
+
+
+def test_shortening_keeps_the_command_and_its_options():
+    argv = shlex.split(
+        "evaluate --policy greedy --n-auvs 1 2 --nodes 3 5 7 --episodes 20 --backend mujoco --out r"
+    )
+    assert shortened(argv) == shlex.split(
+        "evaluate --policy greedy --n-auvs 1 2 --nodes 3 --episodes 1 --out r --backend kinematic"
+    )
+    train = shortened(shlex.split("train training/configs/ppo-general-n2.yaml --seed 1"))
+    smoke = "training/configs/smoke-general.yaml"
+    assert train == [
+        "train",
+        smoke,
+        *shlex.split("--seed 1 --out runs/ppo-general-n2-seed1 --steps 128"),
+    ]
+
+
+def test_every_readme_command_runs_shortened(tmp_path):
+    """In a scratch folder holding the project's training/ and benchmarks/ files, so that the
+    README's relative paths work and nothing it writes touches the checkout."""
+    shutil.copytree(ROOT / "training", tmp_path / "training")
+    shutil.copytree(ROOT / "benchmarks", tmp_path / "benchmarks")
+    done: set[tuple[str, ...]] = set()
+    for argv in readme_commands():
+        if any(p in argv for p in PLACEHOLDERS):
+            continue
+        short = shortened(argv)
+        if "--resume" in short:  # the run it resumes comes first (once)
+            first = [x for x in short if x != "--resume"]
+            if tuple(first) not in done:
+                assert run_cli(*first, check=False, cwd=tmp_path).returncode == 0
+                done.add(tuple(first))
+        if tuple(short) in done:  # the README shows some commands twice
+            continue
+        done.add(tuple(short))
+        again = short[0] == "train" and "--resume" not in short
+        if again and (tmp_path / short[_option(short, "--out") + 1]).exists():
+            short.append("--overwrite")  # a second training into one run folder starts again
+        out = run_cli(*short, check=False, cwd=tmp_path)
+        assert out.returncode == 0, f"iout-mj {' '.join(argv)}: {out.stderr[-1500:]}"
+
+
+def test_the_other_commands_of_the_readme_exist_in_the_environment():
+    """The README's non-`iout-mj` shell lines name programs the project's install provides."""
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"^```bash\n(.*?)^```", text, flags=re.S | re.M)
+    programs = {
+        line.split()[0]
+        for block in blocks
+        for line in block.splitlines()
+        if line.strip() and not line.startswith("#")
+    }
+    for program in programs - {"make", "cat"}:
+        assert program.startswith(".venv/bin/"), f"{program}: name it from .venv/bin"
+        assert (Path(sys.executable).parent / program.removeprefix(".venv/bin/")).exists()
