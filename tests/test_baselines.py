@@ -192,3 +192,16 @@ def test_evaluate_takes_any_env_config(tmp_path, cli):
     bad = cli(*args, "--config", nodes, "--nodes", "7", check=False)
     assert bad.returncode == 2 and "--nodes 7 contradicts config" in bad.stderr
     assert "which sets 2 nodes" in bad.stderr
+
+
+def test_the_table_stays_aligned_with_a_policy_given_by_path():
+    from iout_mj.experiments.evaluate import format_table
+
+    row = {"policy": "runs/a-very-long-run-name/best", "n_auvs": 2, "n_nodes": 7}
+    row |= {"docking_rate": 1.0, "collisions": 0.0}
+    for key in ("mean_aoi", "mean_aoi_horizon", "objective", "jain", "delivered_bits"):
+        row |= {key: 1.0, key + "_std": 0.1}
+    row |= {"propulsion_energy_j": 1.0, "propulsion_energy_j_std": 0.1}
+    lines = format_table([row, {**row, "policy": "greedy"}]).splitlines()
+    assert len({len(line) for line in lines}) == 1  # every row as wide as the header
+    assert lines[1][len(row["policy"])] == " "  # the path does not run into N

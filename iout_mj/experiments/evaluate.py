@@ -274,7 +274,8 @@ def format_table(rows: list[dict[str, Any]]) -> str:
         ("delivered_bits", "data Mbit", 1e-6, 1),
         ("propulsion_energy_j", "kJ/AUV", 1e-3, 0),
     ]
-    head = f"{'policy':<14}{'N':>2}{'K':>4}" + "".join(f"{c[1]:>15}" for c in cols)
+    width = max([14, *(len(str(r["policy"])) + 1 for r in rows)])  # a path as a policy fits
+    head = f"{'policy':<{width}}{'N':>2}{'K':>4}" + "".join(f"{c[1]:>15}" for c in cols)
     lines = [head + f"{'docked':>8}{'coll.':>7}"]
     for r in rows:
         cells = "".join(
@@ -282,7 +283,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
             for key, _, scale, nd in cols
         )
         lines.append(
-            f"{r['policy']:<14}{r['n_auvs']:>2}{r['n_nodes']:>4}{cells}"
+            f"{r['policy']:<{width}}{r['n_auvs']:>2}{r['n_nodes']:>4}{cells}"
             f"{r['docking_rate']:>8.0%}{r['collisions']:>7.2f}"
         )
     return "\n".join(lines)
