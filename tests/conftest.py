@@ -38,6 +38,26 @@ def run_cli(
     )
 
 
+def tiny_training(**changes: object) -> object:
+    """A training config of a few hundred kinematic steps (pipeline tests), with `changes`."""
+    from iout_mj.training import PhaseConfig, TrainConfig
+
+    base: dict = {
+        "name": "t",
+        "n_auvs": 1,
+        "n_nodes": 7,
+        "n_envs": 2,
+        "n_steps": 64,
+        "batch_size": 64,
+        "n_epochs": 1,
+        "net_arch": (32, 32),
+        "eval_every_steps": 128,
+        "eval_episodes": 1,
+        "phases": (PhaseConfig("kinematic", 128), PhaseConfig("kinematic", 128)),
+    }
+    return TrainConfig(**{**base, **changes})
+
+
 @pytest.fixture
 def cli() -> Callable[..., subprocess.CompletedProcess]:
     return run_cli

@@ -11,6 +11,7 @@ import tracemalloc
 
 import gymnasium as gym
 import pytest
+from conftest import tiny_training
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from iout_mj.agents.policies import SHIPPED_DIR, read_trained
@@ -37,7 +38,7 @@ from iout_mj.envs import ENV_ID
 from iout_mj.errors import CheckpointError, PolicyError
 from iout_mj.files import CHUNK_BYTES
 from iout_mj.mission.tokens import token_size
-from iout_mj.training import PhaseConfig, TrainConfig, train
+from iout_mj.training import PhaseConfig, train
 from iout_mj.training.checkpoints import export_policy, read_run_state, recover
 
 
@@ -71,19 +72,8 @@ def policy(tmp_path):
 
 
 def small_config():
-    return TrainConfig(
-        name="t",
-        n_auvs=1,
-        n_nodes=7,
-        n_envs=2,
-        n_steps=32,
-        batch_size=64,
-        n_epochs=1,
-        net_arch=(32, 32),
-        eval_every_steps=64,
-        eval_episodes=1,
-        phases=(PhaseConfig("kinematic", 64), PhaseConfig("kinematic", 64)),
-    )
+    phases = (PhaseConfig("kinematic", 64), PhaseConfig("kinematic", 64))
+    return tiny_training(n_steps=32, eval_every_steps=64, phases=phases)
 
 
 @pytest.fixture(scope="module")
@@ -133,7 +123,8 @@ def test_a_huge_sparse_weights_file_is_refused_before_it_is_hashed(policy):
 def test_an_edited_checkpoint_manifest_is_refused_on_resume(run):
     edit_manifest(run / "last", reseal=False, run_state__num_timesteps=10**12)
     state_before = (run / "state.json").read_text()
-    with pytest.raises((CheckpointError, PolicyError), match=r"policy.json does not match its SHA-256"):
+    edited = r"policy.json does not match its SHA-256"
+    with pytest.raises((CheckpointError, PolicyError), match=edited):
         train(small_config(), run, resume=True, progress=False, parallel=False)
     assert (run / "state.json").read_text() == state_before  # nothing trained
 

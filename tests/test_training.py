@@ -11,7 +11,7 @@ import gymnasium as gym
 import pytest
 import torch
 import yaml
-from conftest import ROOT
+from conftest import ROOT, tiny_training
 from safetensors.torch import load_file
 from test_training_output import assert_one_step_axis
 
@@ -30,21 +30,8 @@ pytestmark = pytest.mark.slow
 
 
 def small(**kw):
-    base = dict(
-        name="t",
-        n_auvs=1,
-        n_nodes=7,
-        n_envs=2,
-        n_steps=64,
-        batch_size=64,
-        n_epochs=1,
-        net_arch=(32, 32),
-        eval_every_steps=128,
-        eval_episodes=1,
-        phases=(PhaseConfig("kinematic", 128), PhaseConfig("mujoco", 128)),
-    )
-    base.update(kw)
-    return TrainConfig(**base)
+    phases = (PhaseConfig("kinematic", 128), PhaseConfig("mujoco", 128))
+    return tiny_training(**{"phases": phases, **kw})
 
 
 def test_short_run_saves_reloads_predicts_and_resumes(tmp_path):

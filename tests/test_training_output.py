@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 import yaml
+from conftest import tiny_training
 from tensorboard.backend.event_processing import plugin_event_accumulator
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.plugins.hparams import plugin_data_pb2
@@ -32,19 +33,8 @@ ROLLOUT = 2 * 64
 
 
 def config() -> TrainConfig:
-    return TrainConfig(
-        name="out",
-        n_auvs=1,
-        n_nodes=7,
-        n_envs=2,
-        n_steps=64,
-        batch_size=64,
-        n_epochs=1,
-        net_arch=(16, 16),
-        eval_every_steps=ROLLOUT,
-        eval_episodes=1,
-        phases=(PhaseConfig("kinematic", 2 * ROLLOUT), PhaseConfig("kinematic", 2 * ROLLOUT)),
-    )
+    phases = (PhaseConfig("kinematic", 2 * ROLLOUT), PhaseConfig("kinematic", 2 * ROLLOUT))
+    return tiny_training(name="out", net_arch=(16, 16), eval_every_steps=ROLLOUT, phases=phases)
 
 
 def scalars(run: Path) -> dict[str, list[tuple[int, float]]]:
