@@ -48,6 +48,15 @@ int64_t iout_groups(const IoutGroup **table)
     return (int64_t)(sizeof GROUPS / sizeof GROUPS[0]);
 }
 
+#define TOKEN(part, name, fixed, per_auv) {#part, #name, fixed, per_auv},
+static const IoutToken TOKENS[] = {IOUT_TOKENS(TOKEN)};
+
+int64_t iout_tokens(const IoutToken **table)
+{
+    *table = TOKENS;
+    return (int64_t)(sizeof TOKENS / sizeof TOKENS[0]);
+}
+
 #define TERM_NAME(name) #name,
 static const char *const TERMS[] = {IOUT_REWARD_TERMS(TERM_NAME)};
 

@@ -1,7 +1,7 @@
 /* The compiled rules' one declaration of everything C and Python share: the structs, the
  * reward terms and the observation groups, each as an X-macro list that expands here to the
- * C struct and, in layout.c, to a table of names, types, offsets and sizes that the library
- * exports (iout_decls, iout_groups). Python (iout_mj/native.py) builds its views from that
+ * C struct and, in native.c, to a table of names, types, offsets and sizes that the library
+ * exports (iout_decls, iout_groups, iout_terms, iout_tokens). Python (iout_mj/native.py) builds its views from that
  * table, by name and offset, and refuses at import a library whose fields differ from its own
  * arrays in name or element type: field order is free, drift is loud.
  *
@@ -100,6 +100,18 @@
     X(docked, 1, 0, 0, 0) X(aoi, 0, 1, 0, 0) X(node_energy, 0, 1, 0, 0)                         \
     X(distance, 0, 0, 1, 0) X(dock_distance, 1, 0, 0, 0) X(time_remaining, 0, 0, 0, 1)
 
+/* The token observation of the general policies (mission.tokens), float32, per env:
+ * [global][N AUV tokens][K_max node tokens, zeros past K][K_max node mask]. Each entry's size
+ * is `fixed + per_auv * M`, with M = N - 1 in an AUV token (the other AUVs) and M = N in a
+ * node token (every AUV). X(part, name, fixed, per AUV) (mission.tokens documents them). */
+#define IOUT_TOKENS(X)                                                                          \
+    X(global, time_remaining, 1, 0) X(global, node_share, 1, 0) X(global, mean_aoi, 1, 0)      \
+    X(auv, position, 2, 0) X(auv, heading_setpoint, 2, 0) X(auv, speed, 1, 0)                  \
+    X(auv, speed_setpoint, 1, 0) X(auv, docked, 1, 0) X(auv, dock_distance, 1, 0)              \
+    X(auv, dock_bearing, 2, 0) X(auv, docking_slack, 1, 0) X(auv, other_auvs, 0, 3)            \
+    X(node, position, 2, 0) X(node, aoi, 1, 0) X(node, reset_progress, 1, 0)                   \
+    X(node, energy, 1, 0) X(node, auv_links, 0, 4)
+
 /* ----------------------------------------------------------------- the structs */
 #define IOUT_VALUE_FIELD(type, name) type name;
 #define IOUT_POINTER_FIELD(type, name) type *name;
@@ -152,6 +164,11 @@ typedef struct {
     int64_t per_auv, per_node, per_pair, fixed;
 } IoutGroup;
 
+typedef struct {
+    const char *part, *name;
+    int64_t fixed, per_auv;
+} IoutToken;
+
 /* ----------------------------------------------------------------- errors */
 enum { IOUT_OK = 0, IOUT_EINVAL = 1, IOUT_EACTION = 2 };
 /* Record an error (printf format) for iout_error(); returns IOUT_EINVAL. */
@@ -162,6 +179,7 @@ int64_t iout_check_mission(const Mission *m, bool actions, bool state_actions);
 /* ----------------------------------------------------------------- exported functions */
 IOUT_API int64_t iout_decls(const IoutDecl **table);
 IOUT_API int64_t iout_groups(const IoutGroup **table);
+IOUT_API int64_t iout_tokens(const IoutToken **table);
 IOUT_API int64_t iout_terms(const char *const **names);
 IOUT_API const char *iout_error(void);
 
@@ -206,6 +224,10 @@ double iout_unserved_aoi(const Params *p, int64_t slot, const double *aoi, int64
 double iout_node_energy_level(double energy_j, double ref_j, double high);
 bool iout_in_area(const Params *p, double x, double y);
 double iout_wrap_angle(double angle_rad);
+
+/* mission/tokens.c */
+IOUT_API int64_t iout_observe_tokens(const Mission *m, int64_t k_max, double eta_speed_mps,
+                                     float *out, int64_t out_size);
 
 /* backends/kinematic.c */
 IOUT_API int64_t iout_kinematic_slot(const Mission *m);

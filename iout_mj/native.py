@@ -67,6 +67,7 @@ F64 = ctypes.c_double
 _SIGNATURES: dict[str, list[Any]] = {
     "iout_decls": [P],
     "iout_groups": [P],
+    "iout_tokens": [P],
     "iout_terms": [P],
     "iout_link_energies": [P, P, I64, P, P],
     "iout_summarise": [P, I64, I64],
@@ -78,6 +79,7 @@ _SIGNATURES: dict[str, list[Any]] = {
     "iout_unserved_aoi_sum": [P, I64, P, I64, P],
     "iout_node_energy_levels": [P, I64, F64, F64, P],
     "iout_kinematic_slot": [P],
+    "iout_observe_tokens": [P, I64, F64, P, I64],
 }
 """Every exported function returns an int64 status (0: done)."""
 for _name, _args in _SIGNATURES.items():
@@ -132,6 +134,26 @@ class _CGroup(ctypes.Structure):
     ]
 
 
+class _CToken(ctypes.Structure):
+    _fields_ = [
+        ("part", ctypes.c_char_p),
+        ("name", ctypes.c_char_p),
+        ("fixed", ctypes.c_int64),
+        ("per_auv", ctypes.c_int64),
+    ]
+
+
+class TokenEntry(NamedTuple):
+    """An entry of a token of the token observation as the compiled library declares it:
+    `fixed + per_auv * M` values, M = N - 1 in an AUV token, N in a node token."""
+
+    part: str
+    """'global', 'auv' or 'node'."""
+    name: str
+    fixed: int
+    per_auv: int
+
+
 class Group(NamedTuple):
     """An observation group as the compiled library declares it: its size is
     per_auv N + per_node K + per_pair N K + fixed."""
@@ -174,6 +196,11 @@ GROUPS = tuple(
     for g in _table(lib.iout_groups, _CGroup)
 )
 """The observation groups, in order (native.h's IOUT_OBSERVATION)."""
+TOKENS = tuple(
+    TokenEntry(t.part.decode(), t.name.decode(), t.fixed, t.per_auv)
+    for t in _table(lib.iout_tokens, _CToken)
+)
+"""The entries of the token observation, in order (native.h's IOUT_TOKENS)."""
 _terms = ctypes.POINTER(ctypes.c_char_p)()
 REWARD_TERMS = tuple(_terms[i].decode() for i in range(lib.iout_terms(ctypes.byref(_terms))))
 """The reward terms, in the order of the mission's term array (IOUT_REWARD_TERMS)."""

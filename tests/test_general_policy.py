@@ -17,7 +17,7 @@ from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
 from iout_mj.envs.batch import MissionBatch
 from iout_mj.envs.scenario_vec_env import ScenarioVecEnv, token_spaces
-from iout_mj.mission.tokens import K_MAX, node_features, observe_tokens, token_size
+from iout_mj.mission.tokens import K_MAX, node_features, token_size
 from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError, build_dataclass
 from iout_mj.training import imitation
@@ -27,7 +27,7 @@ from iout_mj.training.config import TrainConfig
 def _tokens(n: int, k: int, seed: int = 0) -> tuple[np.ndarray, object]:
     env = gym.make(ENV_ID, n_auvs=n, n_nodes=k, backend="kinematic", layout="random")
     env.reset(seed=seed)
-    return observe_tokens(env.unwrapped.mission), env
+    return env.unwrapped.mission.observe_tokens(), env
 
 
 @pytest.mark.parametrize("n, k", [(1, 3), (2, 11), (2, 30)])
@@ -62,7 +62,7 @@ def test_batched_tokens_equal_single_env_tokens():
             "jain",
         ):
             getattr(m.network, name)[...] = getattr(b.network, name)[e]
-        np.testing.assert_array_equal(observe_tokens(m), step.obs[e])
+        np.testing.assert_array_equal(m.observe_tokens(), step.obs[e])
 
 
 def test_one_network_serves_every_k_and_never_picks_a_padded_node():
@@ -75,7 +75,7 @@ def test_one_network_serves_every_k_and_never_picks_a_padded_node():
         assert nodes.max() < k and nodes.min() >= 0
         metrics = run_episode(
             env,
-            lambda e, o: policy.predict(observe_tokens(e.unwrapped.mission), deterministic=True)[0],
+            lambda e, o: policy.predict(e.unwrapped.mission.observe_tokens(), deterministic=True)[0],
             1,
         )
         assert metrics["mission_slots"] >= 1

@@ -50,7 +50,6 @@ from iout_mj.errors import PolicyError
 from iout_mj.errors import PolicyFormatError as PolicyFormatError  # re-exported
 from iout_mj.files import fsync_dir, parse_json, read_capped, remove, sha256_file, write_new
 from iout_mj.files import write_atomic as write_atomic  # re-exported
-from iout_mj.mission.tokens import observe_tokens
 
 FORMAT = "iout-mj-policy"
 SCHEMA_VERSION = 1
@@ -113,7 +112,7 @@ class LoadedPolicy:
         for a general policy the token observation of its mission."""
         if self.general:
             mission = env.unwrapped.mission
-            return self.act(observe_tokens(mission, self.manifest["k_max"]))
+            return self.act(mission.observe_tokens(self.manifest["k_max"]))
         return self.act(obs)
 
 

@@ -1,12 +1,18 @@
 """The general policy: an SB3 actor-critic whose parameters do not depend on K.
 
 Node tokens (`mission.tokens`) are embedded by one shared MLP and mixed by masked
-self-attention; the context (global and AUV features, masked mean and max of the nodes) gives
+self-attention (`TokenAttention`); the context (global and AUV features, masked mean and max of the nodes) gives
 each AUV a query, which scores every node for AET and for the uplink (pointer-style logits:
 query-key dot products; padded nodes at -1e8, so they are never chosen) and gives its heading
 and speed logits. The critic reads the context. SB3's PPO trains it unchanged: the network is
 its `mlp_extractor`, its output the logits of the `MultiDiscrete([H, S, K_max, K_max] * N)`
 action.
+
+Speed: the nodes of a token observation are a prefix of its K_max rows, so a batch is sorted
+by its number of nodes, cut into groups (`GROUP_ROWS` rows at least) and each group computed
+on its own nodes only; the logits of the absent nodes are `MASKED_LOGIT`. The result is the
+padded computation's (to float rounding) at the cost of the nodes present: a batch of K = 3 to
+20 costs about a third of K_max = 30.
 """
 
 from __future__ import annotations
@@ -16,12 +22,17 @@ from typing import Any
 
 import gymnasium as gym
 import torch
+import torch.nn.functional as F
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch import nn
 
 from iout_mj.mission.tokens import GLOBAL_FEATURES, auv_features, node_features
 
 MASKED_LOGIT = -1e8
+GROUP_ROWS = 128
+"""Fewest rows of a group of similar K in one pass (fewer groups below: small batches cost
+more per call than per node)."""
+MAX_GROUPS = 4
 
 
 def _mlp(*sizes: int) -> nn.Sequential:
@@ -29,6 +40,42 @@ def _mlp(*sizes: int) -> nn.Sequential:
     for a, b in itertools.pairwise(sizes):
         layers += [nn.Linear(a, b), nn.Tanh()]
     return nn.Sequential(*layers[:-1])
+
+
+class TokenAttention(nn.Module):
+    """Multi-head self-attention over node tokens with a key mask: `nn.MultiheadAttention`'s
+    computation and parameters (the same state-dict keys), written with plain matrix products,
+    which are about 1.4x faster than PyTorch's CPU attention kernels at these sizes
+    (K <= 30, width 64)."""
+
+    def __init__(self, width: int, num_heads: int):
+        super().__init__()
+        self.heads = num_heads
+        self.in_proj_weight = nn.Parameter(torch.empty(3 * width, width))
+        self.in_proj_bias = nn.Parameter(torch.zeros(3 * width))
+        self.out_proj = nn.Linear(width, width)
+        nn.init.xavier_uniform_(self.in_proj_weight)
+        nn.init.zeros_(self.out_proj.bias)
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """x (B, K, w), mask (B, K) True where a node is: the attended tokens (B, K, w)."""
+        b, k, w = x.shape
+        d = w // self.heads
+        qkv = F.linear(x, self.in_proj_weight, self.in_proj_bias)
+        q, key, v = qkv.view(b, k, 3, self.heads, d).permute(2, 0, 3, 1, 4).unbind(0)
+        scores = (q * d**-0.5) @ key.transpose(-1, -2)  # (B, heads, K, K)
+        scores = scores.masked_fill(~mask[:, None, None, :], MASKED_LOGIT)
+        out = scores.softmax(-1) @ v  # (B, heads, K, d)
+        return self.out_proj(out.transpose(1, 2).reshape(b, k, w))
+
+
+def _groups(counts: torch.Tensor) -> list[torch.Tensor]:
+    """Row indices of a batch cut into groups of similar node counts (sorted)."""
+    rows = counts.shape[0]
+    n = max(1, min(MAX_GROUPS, rows // GROUP_ROWS))
+    if n == 1:
+        return [torch.arange(rows, device=counts.device)]
+    return list(torch.argsort(counts, stable=True).tensor_split(n))
 
 
 class TokenNet(nn.Module):
@@ -40,7 +87,7 @@ class TokenNet(nn.Module):
         self.h, self.s = heading_levels, speed_levels
         self.a_size, self.f_size = auv_features(n_auvs), node_features(n_auvs)
         self.node_in = _mlp(self.f_size, width, width)
-        self.attention = nn.MultiheadAttention(width, num_heads=4, batch_first=True)
+        self.attention = TokenAttention(width, num_heads=4)
         self.norm = nn.LayerNorm(width)
         glob = GLOBAL_FEATURES + n_auvs * self.a_size
         self.context = _mlp(glob + 2 * width, 2 * width, width)
@@ -65,10 +112,13 @@ class TokenNet(nn.Module):
         return obs[:, :g], auvs, nodes, obs[:, n_end:] > 0.5
 
     def encode(self, obs: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """Context (B, w), AUV tokens, node embeddings (B, K, w) and mask (B, K), for the
+        first K rows of every observation's nodes (K: the last row any of them holds)."""
         glob, auvs, nodes, mask = self.split(obs)
+        k = int(mask.any(0).nonzero().max()) + 1 if bool(mask.any()) else 1
+        nodes, mask = nodes[:, :k], mask[:, :k]
         emb = self.node_in(nodes)
-        mixed, _ = self.attention(emb, emb, emb, key_padding_mask=~mask, need_weights=False)
-        emb = self.norm(emb + mixed) * mask[..., None]
+        emb = self.norm(emb + self.attention(emb, mask)) * mask[..., None]
         count = mask.sum(1, keepdim=True).clamp(min=1)
         mean = emb.sum(1) / count
         peak = emb.masked_fill(~mask[..., None], -1e4).amax(1)
@@ -78,28 +128,47 @@ class TokenNet(nn.Module):
     def actor(
         self, ctx: torch.Tensor, auvs: torch.Tensor, emb: torch.Tensor, mask: torch.Tensor
     ) -> torch.Tensor:
-        b = ctx.shape[0]
+        """Logits (B, N*(H+S+2 K_max)) from `encode`'s output (nodes past its K masked)."""
+        b, k = mask.shape
         eye = torch.eye(self.n, device=ctx.device).expand(b, -1, -1)
         q = self.query(torch.cat([ctx[:, None].expand(-1, self.n, -1), auvs, eye], -1))
         motion = self.motion(q)  # (B, N, H+S)
         # pointer logits: a query per AUV and field against a key per node
         qa, qu = self.queries(q).chunk(2, -1)  # (B, N, w)
-        ka, ku = self.keys(emb).chunk(2, -1)  # (B, K_max, w)
+        ka, ku = self.keys(emb).chunk(2, -1)  # (B, K, w)
         scale = self.width**-0.5
         hidden = ~mask[:, None, :]
         aet = (qa @ ka.transpose(1, 2) * scale).masked_fill(hidden, MASKED_LOGIT)
         uplink = (qu @ ku.transpose(1, 2) * scale).masked_fill(hidden, MASKED_LOGIT)
+        if k < self.k_max:
+            pad = (0, self.k_max - k)
+            aet, uplink = (F.pad(x, pad, value=MASKED_LOGIT) for x in (aet, uplink))
         return torch.cat([motion, aet, uplink], -1).flatten(1)
 
-    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _heads(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         ctx, auvs, emb, mask = self.encode(obs)
         return self.actor(ctx, auvs, emb, mask), ctx
+
+    def _critic(self, obs: torch.Tensor) -> tuple[torch.Tensor]:
+        return (self.encode(obs)[0],)
+
+    def _by_groups(self, obs: torch.Tensor, fn: Any) -> tuple[torch.Tensor, ...]:
+        """`fn` on groups of rows of similar node counts, its outputs in the rows' order."""
+        groups = _groups(obs[:, -self.k_max :].sum(1))
+        if len(groups) == 1:
+            return fn(obs)  # type: ignore[no-any-return]
+        parts = [fn(obs[rows]) for rows in groups]
+        order = torch.argsort(torch.cat(groups))
+        return tuple(torch.cat(outs)[order] for outs in zip(*parts, strict=True))
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self._by_groups(obs, self._heads)  # type: ignore[return-value]
 
     def forward_actor(self, obs: torch.Tensor) -> torch.Tensor:
         return self.forward(obs)[0]
 
     def forward_critic(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.encode(obs)[0]
+        return self._by_groups(obs, self._critic)[0]
 
 
 class TokenPolicy(ActorCriticPolicy):

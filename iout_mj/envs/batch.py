@@ -21,7 +21,6 @@ from iout_mj.backends.mujoco.physics import AUVPhysics, Stepper
 from iout_mj.backends.mujoco.task import book, command, start_episode, substeps_per_slot
 from iout_mj.backends.mujoco.warp_stepper import WarpStepper
 from iout_mj.mission import Mission
-from iout_mj.mission.tokens import observe_tokens
 from iout_mj.scenarios import ConfigLike, NodesLike, resolve
 from iout_mj.types import BoolArray, FloatArray
 from iout_mj.world.network import NETWORK_DTYPES
@@ -125,7 +124,7 @@ class MissionBatch:
     def observe(self) -> np.ndarray:
         """(B, D) observations of the current state."""
         if self.observation == "tokens":
-            return observe_tokens(self.mission)
+            return self.mission.observe_tokens()
         return self.mission.flat_observation()
 
     def restart(self, mask: BoolArray | None = None) -> None:

@@ -30,6 +30,7 @@ from iout_mj.mission.actions import ActionMap
 from iout_mj.mission.observation import observation_sizes, split_observation
 from iout_mj.mission.rewards import REWARD_TERMS
 from iout_mj.mission.state import MissionLog, MissionState
+from iout_mj.mission.tokens import ETA_CRUISE_MPS, K_MAX, token_size
 from iout_mj.scenarios import random_layout
 from iout_mj.types import BoolArray, FloatArray
 from iout_mj.world.network import SensorNetwork, rows
@@ -234,6 +235,20 @@ class Mission(native.Frozen):
         native.call(native.lib.iout_observe, self._view_address)
         obs: FloatArray = self._inputs["obs"]
         return obs
+
+    def observe_tokens(self, k_max: int = K_MAX) -> np.ndarray:
+        """The token observation of every environment (`mission.tokens`), float32
+        (*batch, token_size(N, k_max)); raises NativeError if K > k_max."""
+        out = np.empty((*(self.batch or (1,)), token_size(self.n_auvs, k_max)), np.float32)
+        native.call(
+            native.lib.iout_observe_tokens,
+            self._view_address,
+            int(k_max),
+            ETA_CRUISE_MPS,
+            native.address(out),
+            out.size,
+        )
+        return out if self.batch else out[0]
 
     def observation(self) -> dict[str, FloatArray]:
         """The observation groups, in their declared order (`mission.observation`)."""

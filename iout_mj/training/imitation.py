@@ -22,7 +22,6 @@ from stable_baselines3.common.running_mean_std import RunningMeanStd
 from iout_mj.agents.registry import make_policy
 from iout_mj.config import Config
 from iout_mj.envs.gym_env import ENV_ID
-from iout_mj.mission.tokens import observe_tokens
 
 
 @dataclass
@@ -71,7 +70,7 @@ def fly(
         expert = make_policy(planner, seed)
         mission, rewards, done = env.unwrapped.mission, [], False
         while not done:
-            tokens = observe_tokens(mission)
+            tokens = mission.observe_tokens()
             label = expert(mission)
             into.obs.append(tokens)
             into.actions.append(label)
