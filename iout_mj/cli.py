@@ -197,6 +197,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nodes-file", help=NODES_FILE_HELP)
     p.add_argument("--episodes", type=int_at_least(1), default=20, help="episodes per cell")
     p.add_argument("--seed", type=int_at_least(0), default=0, help="episode e uses seed S + e")
+    p.add_argument(
+        "--training-seeds",
+        type=int_at_least(0),
+        nargs="+",
+        default=[0],
+        metavar="K",
+        help="training seeds each learned policy P is flown as: 0 is P itself, k >= 1 the policy "
+        "P-seed<k> resolved like P (ppo-general-n<N>-seed<k>, or the folder P-seed<k>); "
+        "baselines are flown once; the rows keep the name P and say training_seed",
+    )
     p.add_argument("--backend", choices=BACKENDS, default="mujoco", help="how vehicles move")
     p.add_argument(
         "--workers",
@@ -279,12 +289,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func="cmd_train")
 
     p = sub.add_parser(
-        "compare", help="a policy against a reference in every cell of an evaluation", **fmt
+        "compare",
+        help="a policy against a reference in every cell of an evaluation: IQM AoI with 95 %% "
+        "stratified-bootstrap CIs, probability of improvement (rliable)",
+        **fmt,
     )
     p.add_argument("--results", required=True, help="a folder from evaluate --out")
     p.add_argument("--policy", required=True, help="the policy's name in the results")
-    p.add_argument("--reference", default="tour-scheduler", help="the policy to compare with")
-    p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
+    p.add_argument(
+        "--reference",
+        default="tour-scheduler",
+        help="the policy to compare with, or best-planner: in every cell, the baseline with the "
+        "lowest mean AoI(Tmax) that the results hold",
+    )
+    p.add_argument(
+        "--bootstrap-reps",
+        type=int_at_least(100),
+        default=2000,
+        help="stratified-bootstrap resamples of every 95 %% confidence interval",
+    )
+    p.add_argument(
+        "--bootstrap-seed",
+        type=int_at_least(0),
+        default=0,
+        help="seed of the bootstrap's resampling (default: 0)",
+    )
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func="cmd_compare")
 
     p = sub.add_parser(

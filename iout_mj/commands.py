@@ -164,6 +164,7 @@ def _evaluate(args: argparse.Namespace, out: Path | None) -> int:
         ray_address=args.ray,
         ray_timeout_s=args.ray_timeout,
         nodes_file=args.nodes_file,
+        training_seeds=args.training_seeds,
     )
     for note in skipped:
         print(note, file=sys.stderr)
@@ -248,11 +249,18 @@ def train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
 def cmd_compare(args: argparse.Namespace) -> int:
     from iout_mj.experiments import compare
 
-    table = compare.compare(compare.read_rows(Path(args.results)), args.policy, args.reference)
-    if args.json:
-        print(json.dumps(table, indent=2))
-    else:
-        print(compare.format_markdown(table, args.policy, args.reference))
+    results = Path(args.results)
+    rows, episodes = compare.read_rows(results), compare.read_episodes(results)
+    result = compare.compare(
+        rows,
+        episodes,
+        args.policy,
+        args.reference,
+        reps=args.bootstrap_reps,
+        seed=args.bootstrap_seed,
+        results=results,
+    )
+    print(json.dumps(result, indent=2) if args.json else compare.format_markdown(result))
     return 0
 
 

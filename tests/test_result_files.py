@@ -43,13 +43,22 @@ def results(tmp_path):
     folder.mkdir()
     rows = [row("ppo", 7), row("greedy", 7, mean_aoi_horizon=20.0)]
     (folder / "results.json").write_text(json.dumps(rows))
+    episodes = [
+        {k: r[k] for k in ("policy", "n_auvs", "n_nodes", "layout", "backend")}
+        | {"seed": seed, "training_seed": 0 if r["policy"] == "ppo" else None}
+        | {"mean_aoi_horizon": r["mean_aoi_horizon"] + (seed - 0.5) * 2 * r["mean_aoi_horizon_std"]}
+        for r in rows
+        for seed in (0, 1)
+    ]
+    (folder / "episodes.json").write_text(json.dumps(episodes))
     (folder / "traces.json").write_text(json.dumps({"ppo, N=1": trace()}))
     return folder
 
 
 def test_well_formed_files_give_the_table_and_figures(results, tmp_path):
-    (table,) = compare.compare(compare.read_rows(results), "ppo", "greedy")
-    assert table["ratio"] == pytest.approx(11.0 / 20.0)
+    rows, episodes = compare.read_rows(results), compare.read_episodes(results)
+    (table,) = compare.compare(rows, episodes, "ppo", "greedy", reps=200)["cells"]
+    assert table["ratio"] == pytest.approx(11.0 / 20.0)  # IQMs of 10.5, 11.5 and 19.5, 20.5
     names = [p.name for p in figures.figures_from_results(results, tmp_path / "png")]
     assert "fig3_trajectories_k2.png" in names and "fig4_speed_heading_n1.png" in names
     assert "| kinematic_steps_per_s N2_K13" in bench_report.format_markdown(
@@ -103,8 +112,28 @@ def test_compare_refuses_links_fifos_and_missing_files(results, tmp_path):
 
 
 def test_compare_without_a_common_cell_is_a_usage_error(results):
+    rows, episodes = compare.read_rows(results), compare.read_episodes(results)
     with pytest.raises(UsageError, match="no cell holds both 'ppo' and 'planner'"):
-        compare.compare(compare.read_rows(results), "ppo", "planner")
+        compare.compare(rows, episodes, "ppo", "planner")
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda e: e.pop("seed"), "episode 0 has no 'seed'"),
+        (lambda e: e.update(training_seed="a"), "episode 0: training_seed is 'a'"),
+        (lambda e: e.update(mean_aoi_horizon=None), "episode 0: mean_aoi_horizon is None"),
+        (lambda e: e.update(mean_aoi_horizon=-1.0), "episode 0: mean_aoi_horizon is -1.0"),
+    ],
+)
+def test_compare_refuses_a_malformed_episodes_file(results, change, match):
+    path = results / "episodes.json"
+    episodes = json.loads(path.read_text())
+    change(episodes[0])
+    path.write_text(json.dumps(episodes))
+    with pytest.raises(ResultFileError, match=match) as info:
+        compare.read_episodes(results)
+    assert str(path) in str(info.value)
 
 
 @pytest.mark.parametrize(

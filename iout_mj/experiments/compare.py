@@ -1,16 +1,31 @@
-"""A learned policy against a reference in every cell of an evaluation: the generalisation
-table (mean AoI over T_max, their ratio, docking rates)."""
+"""A policy against a reference in every cell of an evaluation: the interquartile mean of
+AoI(Tmax) over the cell's runs (training seeds x episodes) with 95 % stratified-bootstrap
+confidence intervals, the ratio of the IQMs, the probability that the policy's AoI is lower
+than the reference's, docking rates and data; then the same over all cells (`statistics`:
+rliable). The reference `best-planner` is, in every cell, the baseline with the lowest mean
+AoI(Tmax) there.
+
+Reads results.json (the cells, docking and data) and episodes.json (the runs) of a folder
+written by `iout-mj evaluate --out`.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from iout_mj.agents.registry import POLICIES
 from iout_mj.errors import ResultFileError, UsageError
-from iout_mj.experiments import result_files
+from iout_mj.experiments import result_files, statistics
+from iout_mj.experiments.statistics import REPS, Cell, cell_of
 
 LABELS = ("policy", "layout", "backend")
 MEASURES = ("mean_aoi_horizon", "docking_rate", "delivered_bits")
+HINT = "accepted a folder written by `iout-mj evaluate --out`"
+BEST_PLANNER = "best-planner"
+"""The reference that is, in every cell, the baseline with the lowest mean AoI(Tmax) there."""
 
 
 def read_rows(results: Path) -> list[dict[str, Any]]:
@@ -21,58 +36,162 @@ def read_rows(results: Path) -> list[dict[str, Any]]:
         ResultFileError: naming the file, the row and what is wrong.
     """
     path = results / "results.json"
-    rows = result_files.read_rows(
-        path, LABELS, MEASURES, "accepted a folder written by `iout-mj evaluate --out`"
-    )
+    rows = result_files.read_rows(path, LABELS, MEASURES, HINT)
     for i, row in enumerate(rows):
-        if row["mean_aoi_horizon"] <= 0:
-            raise ResultFileError(
-                f"{path}: row {i}: mean_aoi_horizon is {row['mean_aoi_horizon']}: accepted a "
-                "number > 0 (an age of information)"
-            )
+        _positive_aoi(row, f"{path}: row {i}")
     return rows
 
 
-def compare(rows: list[dict[str, Any]], policy: str, reference: str) -> list[dict[str, Any]]:
-    """One row per (N, K, layout, backend) that both policies flew."""
-    by_cell = {(r["policy"], r["n_auvs"], r["n_nodes"], r["layout"], r["backend"]): r for r in rows}
-    out = []
-    for (name, n, k, layout, backend), row in sorted(by_cell.items()):
-        ref = by_cell.get((reference, n, k, layout, backend))
-        if name != policy or ref is None:
+def read_episodes(results: Path) -> list[dict[str, Any]]:
+    """The episode rows of an evaluation folder (episodes.json), checked like `read_rows`."""
+    path = results / "episodes.json"
+    episodes = result_files.read_episodes(path, LABELS, (statistics.MEASURE,), HINT)
+    for i, row in enumerate(episodes):
+        _positive_aoi(row, f"{path}: episode {i}")
+    return episodes
+
+
+def _positive_aoi(row: dict[str, Any], where: str) -> None:
+    if row["mean_aoi_horizon"] <= 0:
+        raise ResultFileError(
+            f"{where}: mean_aoi_horizon is {row['mean_aoi_horizon']}: accepted a number > 0 "
+            "(an age of information)"
+        )
+
+
+def references(rows: list[dict[str, Any]], policy: str, reference: str) -> dict[Cell, str]:
+    """The reference of every cell that `policy` flew: `reference` where it flew too, or for
+    `best-planner` the baseline (other than `policy`) with the lowest mean AoI(Tmax) there."""
+    flown = {cell_of(r) for r in rows if r["policy"] == policy}
+    chosen: dict[Cell, tuple[float, str]] = {}
+    for r in rows:
+        cell, name = cell_of(r), r["policy"]
+        if cell not in flown:
             continue
-        out.append(
+        if reference == BEST_PLANNER and name in POLICIES and name != policy:
+            if cell not in chosen or r["mean_aoi_horizon"] < chosen[cell][0]:
+                chosen[cell] = (r["mean_aoi_horizon"], name)
+        elif name == reference:
+            chosen[cell] = (r["mean_aoi_horizon"], name)
+    if not chosen:
+        holds = "a baseline besides it" if reference == BEST_PLANNER else repr(reference)
+        raise UsageError(
+            f"no cell holds both {policy!r} and {holds}: accepted a --policy and --reference "
+            f"(a policy name, or {BEST_PLANNER}) that the results hold in the same cells"
+        )
+    return {cell: name for cell, (_, name) in sorted(chosen.items())}
+
+
+def _runs(runs: dict[Cell, np.ndarray], name: str, cell: Cell, results: Path | None) -> np.ndarray:
+    if cell not in runs:
+        raise ResultFileError(
+            f"{results or 'the results'}: episodes.json holds no episode of {name!r} at "
+            f"N={cell[0]}, K={cell[1]} that results.json summarises: {HINT}, unchanged"
+        )
+    return runs[cell]
+
+
+def compare(
+    rows: list[dict[str, Any]],
+    episodes: list[dict[str, Any]],
+    policy: str,
+    reference: str,
+    reps: int = REPS,
+    seed: int = 0,
+    results: Path | None = None,
+) -> dict[str, Any]:
+    """Per cell (N, K, layout, backend) that both policies flew: IQM AoI(Tmax) [95 % CI] of
+    each, their ratio, P(policy AoI < reference AoI) [CI], docking rates and Mbit; then the
+    aggregate over those cells (`statistics.comparison`); the bootstrap is seeded by `seed`.
+
+    Raises:
+        UsageError: no cell holds both, or the cells hold unequal numbers of runs.
+    """
+    refs = references(rows, policy, reference)
+    summary = {(r["policy"], cell_of(r)): r for r in rows}
+    mine_runs = statistics.aoi_runs(episodes, policy)
+    runs_of = {name: statistics.aoi_runs(episodes, name) for name in set(refs.values())}
+    aoi = [_runs(mine_runs, policy, cell, results) for cell in refs]
+    theirs = [_runs(runs_of[name], name, cell, results) for cell, name in refs.items()]
+    cells, total = statistics.comparison(aoi, theirs, reps, seed)
+    table = []
+    for (cell, name), stats in zip(refs.items(), cells, strict=True):
+        mine, ref = summary[(policy, cell)], summary[(name, cell)]
+        table.append(
             {
-                "n_auvs": n,
-                "n_nodes": k,
-                "layout": layout,
-                "policy_aoi": row["mean_aoi_horizon"],
-                "policy_aoi_std": row["mean_aoi_horizon_std"],
-                "reference_aoi": ref["mean_aoi_horizon"],
-                "reference_aoi_std": ref["mean_aoi_horizon_std"],
-                "ratio": row["mean_aoi_horizon"] / ref["mean_aoi_horizon"],
-                "policy_docked": row["docking_rate"],
+                "n_auvs": cell[0],
+                "n_nodes": cell[1],
+                "layout": cell[2],
+                "backend": cell[3],
+                "reference": name,
+                **stats,
+                "policy_docked": mine["docking_rate"],
                 "reference_docked": ref["docking_rate"],
-                "policy_mbit": row["delivered_bits"] / 1e6,
+                "policy_mbit": mine["delivered_bits"] / 1e6,
                 "reference_mbit": ref["delivered_bits"] / 1e6,
             }
         )
-    if not out:
-        raise UsageError(f"no cell holds both {policy!r} and {reference!r}")
-    return out
+    played = {e["seed"] for e in episodes if e["policy"] == policy}
+    total |= {
+        "training_seeds": statistics.training_seeds(episodes, policy),
+        "episodes": len(played),
+        "reference_runs_per_cell": min(len(t) for t in theirs),
+    }
+    bootstrap = {"method": "stratified", "reps": reps, "seed": seed}
+    return {
+        "policy": policy,
+        "reference": reference,
+        "confidence": statistics.CONFIDENCE,
+        "bootstrap": bootstrap,
+        "cells": table,
+        "aggregate": total,
+    }
 
 
-def format_markdown(table: list[dict[str, Any]], policy: str, reference: str) -> str:
+def format_markdown(result: dict[str, Any]) -> str:
+    """The per-cell table, then the aggregate line."""
+    policy, reference = result["policy"], result["reference"]
+    best = reference == BEST_PLANNER
+    ref = "best planner" if best else reference
     lines = [
-        f"| N | K | {policy} AoI(Tmax) | {reference} AoI(Tmax) | ratio | docked "
-        f"| docked ({reference}) | Mbit | Mbit ({reference}) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        f"| N | K |{' best planner |' if best else ''} {policy} IQM AoI(Tmax) [95 % CI] "
+        f"| {ref} IQM AoI(Tmax) [95 % CI] | ratio | P({policy} < {ref}) [95 % CI] | docked "
+        f"| docked ({ref}) | Mbit | Mbit ({ref}) |",
+        "|---|---|" + ("---|" if best else "") + "---|---|---|---|---|---|---|---|",
     ]
-    for r in table:
+    for r in result["cells"]:
+        named = f" {r['reference']} |" if best else ""
         lines.append(
-            f"| {r['n_auvs']} | {r['n_nodes']} | {r['policy_aoi']:.2f} ± {r['policy_aoi_std']:.2f} "
-            f"| {r['reference_aoi']:.2f} ± {r['reference_aoi_std']:.2f} | {r['ratio']:.3f} "
+            f"| {r['n_auvs']} | {r['n_nodes']} |{named} {_ci(r, 'policy_aoi_iqm')} "
+            f"| {_ci(r, 'reference_aoi_iqm')} | {r['ratio']:.3f} | {_ci(r, 'p_improvement')} "
             f"| {r['policy_docked']:.0%} | {r['reference_docked']:.0%} "
             f"| {r['policy_mbit']:.1f} | {r['reference_mbit']:.1f} |"
         )
-    return "\n".join(lines)
+    return "\n".join(lines) + "\n\n" + _aggregate_line(result)
+
+
+def _ci(row: dict[str, Any], key: str) -> str:
+    return f"{row[key]:.2f} [{row[key + '_low']:.2f}, {row[key + '_high']:.2f}]"
+
+
+def _aggregate_line(result: dict[str, Any]) -> str:
+    policy, total, boot = result["policy"], result["aggregate"], result["bootstrap"]
+    ref = "the best planner" if result["reference"] == BEST_PLANNER else result["reference"]
+    seeds, cells = total["training_seeds"], total["cells"]
+    runs = (
+        f"{seeds} training seed{_s(seeds)} x {total['episodes']} episodes"
+        if seeds
+        else f"{total['episodes']} episodes, no training seeds"
+    )
+    return (
+        f"aggregate over {cells} cell{_s(cells)}: IQM of AoI(Tmax) / {ref}'s mean AoI(Tmax) in "
+        f"the cell {_ci(total, 'normalised_aoi_iqm')} (lower is better), "
+        f"P({policy} < {ref}) {_ci(total, 'p_improvement')}; {policy}: {runs} = "
+        f"{total['runs_per_cell']} runs per cell, {ref}: {total['reference_runs_per_cell']}; "
+        f"{result['confidence'] * 100:g} % CIs by stratified bootstrap "
+        f"({boot['reps']:,} resamples, seed {boot['seed']}; rliable)"
+    )
+
+
+def _s(count: int) -> str:
+    return "" if count == 1 else "s"

@@ -4,6 +4,10 @@ Episode e of every (policy, N, K) uses seed S + e, so every policy starts from t
 Every cell is resolved like any env (`scenarios.resolve`): "paper" is the paper's layout for
 K = 7 and 13 and one seeded layout per K otherwise, "random" a new layout every episode (the
 same for every policy), and a config's own nodes (or a nodes file) are flown in every episode.
+
+A learned policy P is flown as each of its training seeds: seed 0 is P itself, seed k >= 1 the
+policy `P-seed<k>` resolved like P (a shipped name, `ppo-general` per N, or a folder); its rows
+keep the label P and carry `training_seed`. A baseline has no training seed (null), flown once.
 """
 
 from __future__ import annotations
@@ -25,7 +29,9 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from iout_mj.agents.policies import load_policy
+from iout_mj.agents.policies import GENERAL, LEGACY_FILES, load_policy
+from iout_mj.agents.policy_format import MANIFEST
+from iout_mj.agents.registry import POLICIES
 from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
 from iout_mj.errors import PolicyError, PolicyMismatchError, UsageError
@@ -49,6 +55,9 @@ class Job:
     seed: int
     keep_trace: bool = False
     trust_pickle: bool = False
+    label: str | None = None
+    """The policy's name in the rows (default `policy`): a training seed's variant keeps P's."""
+    training_seed: int | None = None
 
 
 def scenario_grid(
@@ -77,11 +86,12 @@ def _episode(job: Job) -> dict[str, Any]:
     policy = load_policy(job.policy, env, job.seed, job.trust_pickle)
     metrics = run_episode(env, policy, job.seed)
     row: dict[str, Any] = {
-        "policy": job.policy,
+        "policy": job.label or job.policy,
         "n_auvs": job.spec.n_auvs,
         "n_nodes": job.spec.n_nodes,
         "layout": job.spec.layout,
         "seed": job.seed,
+        "training_seed": job.training_seed,
         "backend": job.spec.backend,
         "noise_model": job.spec.config.acoustics.noise_model,
         "max_current_mps": job.spec.config.physics.max_current_mps,
@@ -106,21 +116,93 @@ def _pool(workers: int) -> Any:
 
 
 def _cells(
-    policies: list[str], specs: list[EnvSpec], trust_pickle: bool
+    policies: list[str], specs: list[EnvSpec], trust_pickle: bool, training_seeds: list[int]
 ) -> tuple[list[tuple[str, EnvSpec]], list[str]]:
-    """The (policy, scenario) cells a policy can serve, and why the others are skipped. An
-    unknown or unreadable policy fails here, before any worker starts."""
+    """The (policy, scenario) cells a policy can serve (decided by its first training seed),
+    and why the others are skipped. An unknown or unreadable policy, or a learned policy's
+    training seed that is missing or cannot serve a cell its first seed serves, fails here,
+    before any worker starts."""
     cells, skipped = [], []
     for name, spec in product(policies, specs):
+        seeds = training_seeds if learned(name) else [0]
         env = scenario_env(dataclasses.replace(spec, backend="kinematic"))
         try:
-            load_policy(name, env, trust_pickle=trust_pickle)
+            _load_seed(name, seeds[0], spec, env, trust_pickle)
+            for k in seeds[1:]:
+                try:
+                    _load_seed(name, k, spec, env, trust_pickle)
+                except PolicyMismatchError as exc:
+                    raise PolicyError(
+                        f"training seed {k} of {name!r} cannot serve N={spec.n_auvs}, "
+                        f"K={spec.n_nodes}, which seed {seeds[0]} serves: {exc}. Accepted: "
+                        "training seeds of one policy made for the same spaces"
+                    ) from exc
             cells.append((name, spec))
         except PolicyMismatchError as exc:
             skipped.append(f"skipped {name} at N={spec.n_auvs}, K={spec.n_nodes}: {exc}")
         finally:
             env.close()
     return cells, skipped
+
+
+def _jobs(
+    cells: list[tuple[str, EnvSpec]],
+    training_seeds: list[int],
+    episodes: int,
+    seed: int,
+    trust_pickle: bool,
+) -> list[Job]:
+    """Every episode of every cell: a learned policy's once per training seed (the first keeps
+    the trace), a baseline's once."""
+    jobs = []
+    for name, spec in cells:
+        seeds: list[int | None] = list(training_seeds) if learned(name) else [None]
+        for k, e in product(seeds, range(episodes)):
+            variant = name if k is None else seed_variant(name, k, spec.n_auvs)
+            trace = e == 0 and k == seeds[0] and _traced(spec)
+            jobs.append(Job(variant, spec, seed + e, trace, trust_pickle, name, k))
+    return jobs
+
+
+def learned(name: str) -> bool:
+    """Whether a policy name is a trained policy (it has training seeds), not a baseline."""
+    return name not in POLICIES
+
+
+def seed_variant(name: str, training_seed: int, n_auvs: int) -> str:
+    """The policy that is training seed `training_seed` of the learned policy `name` in an env
+    of `n_auvs` AUVs: `name` itself for seed 0, else `name-seed<k>` resolved like `name`
+    (`ppo-general` -> `ppo-general-n<N>-seed<k>`, `runs/gen` -> `runs/gen-seed<k>`, a policy
+    file `runs/gen/policy.json` -> `runs/gen-seed<k>/policy.json`)."""
+    if training_seed == 0:
+        return name
+    suffix = f"-seed{training_seed}"
+    if name == GENERAL:
+        return f"{GENERAL}-n{n_auvs}{suffix}"
+    path = Path(name)
+    if path.name in (MANIFEST, *LEGACY_FILES) and path.is_file():
+        return str(path.parent.with_name(path.parent.name + suffix) / path.name)
+    return str(path) + suffix
+
+
+def _load_seed(name: str, k: int, spec: EnvSpec, env: Any, trust_pickle: bool) -> None:
+    """Load training seed `k` of `name` for `spec`'s env: a mismatch raises
+    `PolicyMismatchError` as it is; a missing or unreadable seed variant a `PolicyError` naming
+    the policy it looked for and what is accepted."""
+    variant = seed_variant(name, k, spec.n_auvs)
+    try:
+        load_policy(variant, env, trust_pickle=trust_pickle)
+    except PolicyMismatchError:
+        raise
+    except PolicyError as exc:
+        if variant == name:
+            raise
+        pattern = variant.replace(f"-seed{k}", "-seed<k>")
+        raise PolicyError(
+            f"training seed {k} of {name!r} at N={spec.n_auvs}, K={spec.n_nodes} is the policy "
+            f"{variant!r} (training seed 0 is {name!r} itself, k >= 1 is {pattern!r}); it "
+            f"cannot be used: {exc}"
+        ) from exc
 
 
 def _once_each(what: str, values: list[Any]) -> None:
@@ -131,7 +213,8 @@ def _once_each(what: str, values: list[Any]) -> None:
 
 
 def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Mean and standard deviation per (policy, N, K, layout, backend)."""
+    """Mean and standard deviation per (policy, N, K, layout, backend), over every episode of
+    the cell (its training seeds pooled), and how many training seeds it holds (0: a baseline)."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for e in episodes:
         cell = (e["policy"], e["n_auvs"], e["n_nodes"], e["layout"], e["backend"])
@@ -148,6 +231,7 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "noise_model": eps[0]["noise_model"],
             "max_current_mps": eps[0]["max_current_mps"],
             "episodes": len(eps),
+            "training_seeds": len({e.get("training_seed") for e in eps} - {None}),
         }
         for key in SUMMARY_KEYS:
             values = [e[key] for e in summaries]
@@ -198,6 +282,7 @@ def evaluate(
     ray_address: str | None = None,
     ray_timeout_s: float | None = None,
     nodes_file: NodesLike = None,
+    training_seeds: list[int] | None = None,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Run every (policy, N, K, episode) a policy can serve; returns (summary rows, episode
     rows). The scenarios are `scenario_grid`'s (the env config `base`: current, noise,
@@ -205,34 +290,48 @@ def evaluate(
     (another N, K or action mapping) are skipped and said in `skipped`. With `ray_address`
     ("local" or a cluster address, joined within `ray_timeout_s`) the episodes run as Ray
     tasks: the same rows. `workers` is at most the CPUs this process may use (default: as
-    many as there are CPUs and episodes); a policy, N or K given twice is refused."""
+    many as there are CPUs and episodes); a policy, N or K given twice is refused. A learned
+    policy flies each of `training_seeds` (default [0]: itself; `seed_variant`)."""
     if episodes < 1:
         raise UsageError(f"episodes={episodes}: accepted an integer >= 1")
-    for what, values in (("policy", policies), ("N", n_auvs), ("K", nodes)):
+    training_seeds = [0] if training_seeds is None else list(training_seeds)
+    if not training_seeds or min(training_seeds) < 0:
+        raise UsageError(f"training seeds {training_seeds}: accepted one or more integers >= 0")
+    named = (("policy", policies), ("N", n_auvs), ("K", nodes), ("training seed", training_seeds))
+    for what, values in named:
         _once_each(what, list(values or []))
     if workers is not None:
         cpu_bounded(workers, "workers", 1)
     specs = scenario_grid(base, n_auvs, nodes, layout, backend, nodes_file)
-    cells, notes = _cells(policies, specs, trust_pickle)
+    cells, notes = _cells(policies, specs, trust_pickle, training_seeds)
     if skipped is not None:
         skipped.extend(notes)
     if not cells:
         raise PolicyError("no policy can serve any of the asked (N, K): " + "; ".join(notes))
-    if len(cells) * episodes > MAX_EPISODES:
+    jobs = _jobs(cells, training_seeds, episodes, seed, trust_pickle)
+    if len(jobs) > MAX_EPISODES:
         raise UsageError(
-            f"{len(cells)} cells x {episodes} episodes = {len(cells) * episodes} episodes: "
-            f"accepted at most {MAX_EPISODES} in one evaluation"
+            f"{len(cells)} cells x {episodes} episodes (x training seeds of learned policies) = "
+            f"{len(jobs)} episodes: accepted at most {MAX_EPISODES} in one evaluation"
         )
-    jobs = [
-        Job(p, spec, seed + e, e == 0 and _traced(spec), trust_pickle)
-        for (p, spec), e in product(cells, range(episodes))
-    ]
     workers = workers or min(len(jobs), usable_cpus())
     quiet: dict[str, Any] = {} if progress else {"disable": True}  # else tqdm's (TQDM_DISABLE)
     with tqdm(total=len(jobs), desc="episodes", unit="ep", **quiet) as bar:
         results = _run(jobs, workers, ray_address, ray_timeout_s, lambda: bar.update(1))
-    results.sort(key=lambda r: (r["policy"], r["n_auvs"], r["n_nodes"], r["seed"]))
+    results.sort(key=_row_order)
     return summarize(results), results
+
+
+def _row_order(row: dict[str, Any]) -> tuple[Any, ...]:
+    """Episode rows by policy, N, K, training seed (a baseline's first), episode seed."""
+    trained = row["training_seed"]
+    return (
+        row["policy"],
+        row["n_auvs"],
+        row["n_nodes"],
+        -1 if trained is None else trained,
+        row["seed"],
+    )
 
 
 def _traced(spec: EnvSpec) -> bool:

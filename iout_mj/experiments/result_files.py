@@ -117,3 +117,24 @@ def read_rows(
             )
         cells.add(cell)
     return rows
+
+
+def read_episodes(
+    path: Path, labels: tuple[str, ...], measures: Iterable[str], hint: str
+) -> list[dict[str, Any]]:
+    """Episode rows (`episodes.json`, `evaluate.evaluate`), each with N, K, the text `labels`,
+    its episode `seed`, its `training_seed` (an integer, null or absent: a baseline, or results
+    written before training seeds) and the `measures` as finite numbers."""
+    rows = listing(load(path, hint), str(path), min_len=1)
+    for i, raw in enumerate(rows):
+        where = f"{path}: episode {i}"
+        row = mapping(raw, where)
+        for key in labels:
+            text(row, key, where)
+        integer(row, "n_auvs", where, 1)
+        integer(row, "n_nodes", where, 1)
+        integer(row, "seed", where)
+        if row.get("training_seed") is not None:
+            integer(row, "training_seed", where)
+        numbers(row, measures, where)
+    return rows
