@@ -177,17 +177,15 @@ def _ci(row: dict[str, Any], key: str) -> str:
 def _aggregate_line(result: dict[str, Any]) -> str:
     policy, total, boot = result["policy"], result["aggregate"], result["bootstrap"]
     ref = "the best planner" if result["reference"] == BEST_PLANNER else result["reference"]
-    seeds, cells = total["training_seeds"], total["cells"]
-    runs = (
-        f"{seeds} training seed{_s(seeds)} x {total['episodes']} episodes"
-        if seeds
-        else f"{total['episodes']} episodes, no training seeds"
-    )
+    seeds, cells, episodes = total["training_seeds"], total["cells"], total["episodes"]
+    flown = f"{episodes} episode{_s(episodes)}"
+    runs = f"{seeds} training seed{_s(seeds)} x {flown}" if seeds else f"{flown}, no training seeds"
+    per_cell = total["runs_per_cell"]
     return (
         f"aggregate over {cells} cell{_s(cells)}: IQM of AoI(Tmax) / {ref}'s mean AoI(Tmax) in "
         f"the cell {_ci(total, 'normalised_aoi_iqm')} (lower is better), "
         f"P({policy} < {ref}) {_ci(total, 'p_improvement')}; {policy}: {runs} = "
-        f"{total['runs_per_cell']} runs per cell, {ref}: {total['reference_runs_per_cell']}; "
+        f"{per_cell} run{_s(per_cell)} per cell, {ref}: {total['reference_runs_per_cell']}; "
         f"{result['confidence'] * 100:g} % CIs by stratified bootstrap "
         f"({boot['reps']:,} resamples, seed {boot['seed']}; rliable)"
     )
