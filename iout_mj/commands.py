@@ -251,6 +251,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
     results = Path(args.results)
     rows, episodes = compare.read_rows(results), compare.read_episodes(results)
+    print(
+        f"compare: {args.bootstrap_reps:,} stratified-bootstrap resamples per interval (about "
+        "a second per cell) ...",
+        file=sys.stderr,
+    )
     result = compare.compare(
         rows,
         episodes,
