@@ -202,7 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_at_least(0),
         nargs="+",
         default=[0],
-        metavar="K",
+        metavar="SEED",
         help="training seeds each learned policy P is flown as: 0 is P itself, k >= 1 the policy "
         "P-seed<k> resolved like P (ppo-general-n<N>-seed<k>, or the folder P-seed<k>); "
         "baselines are flown once; the rows keep the name P and say training_seed",
