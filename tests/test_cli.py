@@ -106,6 +106,10 @@ def test_bench_quick_json_has_every_measure():
     assert 0 < row["ratio"] < 2 and 0 < row["batch_8_ratio"] < 2
     assert r["substeps_per_slot"] * r["timestep_s"] == pytest.approx(25.0)
     assert r["kinematic_steps_per_s"]["N2_K13"] > r["kinematic_single_env_steps_per_s"]["N2_K13"]
+    tokens = r["token_ppo_steps_per_s"]
+    assert set(tokens) == {"kinematic", "mujoco", "trivial"} and min(tokens.values()) > 0
+    assert r["token_ppo_ratio"] == pytest.approx(tokens["kinematic"] / tokens["trivial"])
+    assert tokens["mujoco"] < tokens["kinematic"]  # the physics costs something
 
 
 def test_bench_formats_the_saved_run_as_the_readme_table():

@@ -75,7 +75,9 @@ def test_one_network_serves_every_k_and_never_picks_a_padded_node():
         assert nodes.max() < k and nodes.min() >= 0
         metrics = run_episode(
             env,
-            lambda e, o: policy.predict(e.unwrapped.mission.observe_tokens(), deterministic=True)[0],
+            lambda e, o: policy.predict(e.unwrapped.mission.observe_tokens(), deterministic=True)[
+                0
+            ],
             1,
         )
         assert metrics["mission_slots"] >= 1

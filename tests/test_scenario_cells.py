@@ -145,6 +145,24 @@ def scalars(folder) -> dict[str, dict[int, float]]:
     return {tag: {s.step: s.value for s in events.Scalars(tag)} for tag in events.Tags()["scalars"]}
 
 
+def test_mujoco_cells_stepped_on_two_threads_step_as_in_turn():
+    base = Config()
+    cells = [(3, base), (5, noise(base, "wenz")), (4, base)]
+    runs = []
+    for nthread in (0, 2):
+        venv = ScenarioVecEnv(cells, envs_per_cell=1, backend="mujoco", seed=5, nthread=nthread)
+        assert (venv._pool is None) == (nthread == 0)
+        rng = np.random.default_rng(1)
+        out = [venv.reset()]
+        for _ in range(3):
+            obs, rewards, _, _ = venv.step(cell_actions(rng, venv))
+            out += [obs, rewards[:, None]]
+        venv.close()
+        runs.append(out)
+    for a, b in zip(*runs, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_a_ppo_run_logs_every_cells_reward_terms_and_episodes(tmp_path):
     base = Config()
     zero = RewardWeights(**{f.name: 0.0 for f in dataclasses.fields(RewardWeights)})

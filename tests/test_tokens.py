@@ -8,7 +8,6 @@ import pytest
 
 from iout_mj.envs import ENV_ID
 from iout_mj.envs.batch import MissionBatch
-from iout_mj.native import NativeError
 from iout_mj.mission.tokens import (
     ETA_CRUISE_MPS,
     GLOBAL_FEATURES,
@@ -17,6 +16,7 @@ from iout_mj.mission.tokens import (
     node_features,
     token_size,
 )
+from iout_mj.native import NativeError
 
 
 def _bearing(delta_m, heading_rad):

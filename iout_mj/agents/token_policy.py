@@ -1,12 +1,12 @@
 """The general policy: an SB3 actor-critic whose parameters do not depend on K.
 
 Node tokens (`mission.tokens`) are embedded by one shared MLP and mixed by masked
-self-attention (`TokenAttention`); the context (global and AUV features, masked mean and max of the nodes) gives
-each AUV a query, which scores every node for AET and for the uplink (pointer-style logits:
-query-key dot products; padded nodes at -1e8, so they are never chosen) and gives its heading
-and speed logits. The critic reads the context. SB3's PPO trains it unchanged: the network is
-its `mlp_extractor`, its output the logits of the `MultiDiscrete([H, S, K_max, K_max] * N)`
-action.
+self-attention (`TokenAttention`); the context (global and AUV features, masked mean and max
+of the nodes) gives each AUV a query, which scores every node for AET and for the uplink
+(pointer-style logits: query-key dot products; padded nodes at -1e8, so they are never
+chosen) and gives its heading and speed logits. The critic reads the context. SB3's PPO
+trains it unchanged: the network is its `mlp_extractor`, its output the logits of the
+`MultiDiscrete([H, S, K_max, K_max] * N)` action.
 
 Speed: the nodes of a token observation are a prefix of its K_max rows, so a batch is sorted
 by its number of nodes, cut into groups (`GROUP_ROWS` rows at least) and each group computed
@@ -22,9 +22,9 @@ from typing import Any
 
 import gymnasium as gym
 import torch
-import torch.nn.functional as F
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch import nn
+from torch.nn import functional
 
 from iout_mj.mission.tokens import GLOBAL_FEATURES, auv_features, node_features
 
@@ -61,7 +61,7 @@ class TokenAttention(nn.Module):
         """x (B, K, w), mask (B, K) True where a node is: the attended tokens (B, K, w)."""
         b, k, w = x.shape
         d = w // self.heads
-        qkv = F.linear(x, self.in_proj_weight, self.in_proj_bias)
+        qkv = functional.linear(x, self.in_proj_weight, self.in_proj_bias)
         q, key, v = qkv.view(b, k, 3, self.heads, d).permute(2, 0, 3, 1, 4).unbind(0)
         scores = (q * d**-0.5) @ key.transpose(-1, -2)  # (B, heads, K, K)
         scores = scores.masked_fill(~mask[:, None, None, :], MASKED_LOGIT)
@@ -142,7 +142,7 @@ class TokenNet(nn.Module):
         uplink = (qu @ ku.transpose(1, 2) * scale).masked_fill(hidden, MASKED_LOGIT)
         if k < self.k_max:
             pad = (0, self.k_max - k)
-            aet, uplink = (F.pad(x, pad, value=MASKED_LOGIT) for x in (aet, uplink))
+            aet, uplink = (functional.pad(x, pad, value=MASKED_LOGIT) for x in (aet, uplink))
         return torch.cat([motion, aet, uplink], -1).flatten(1)
 
     def _heads(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -156,7 +156,7 @@ class TokenNet(nn.Module):
         """`fn` on groups of rows of similar node counts, its outputs in the rows' order."""
         groups = _groups(obs[:, -self.k_max :].sum(1))
         if len(groups) == 1:
-            return fn(obs)  # type: ignore[no-any-return]
+            return fn(obs)
         parts = [fn(obs[rows]) for rows in groups]
         order = torch.argsort(torch.cat(groups))
         return tuple(torch.cat(outs)[order] for outs in zip(*parts, strict=True))

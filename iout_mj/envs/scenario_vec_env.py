@@ -8,6 +8,7 @@ VecEnv's RNG, so a cell steps exactly as its batch would alone (`ScenarioCell.ba
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -94,8 +95,9 @@ class ScenarioVecEnv(BatchedVecEnv):
         envs_per_cell: environments of each cell.
         backend: "kinematic", "mujoco" or "warp".
         seed: seeds the RNG that seeds every cell's stream (`set_random_state`).
-        nthread: C threads of each cell's MuJoCo rollout (0 to the CPUs this process may
-            use).
+        nthread: threads that step the cells of a MuJoCo backend concurrently (each cell's
+            rollout releases the GIL; 0 or 1: in turn on the calling thread; at most the CPUs
+            this process may use). Every cell steps exactly as it would alone.
 
     `cells` holds each cell's K, config, batch and environment indices; `term_values()` the
     last step's reward terms of all environments. Stepping or resetting after `close()`
@@ -117,11 +119,16 @@ class ScenarioVecEnv(BatchedVecEnv):
         self.cells: list[ScenarioCell] = []
         for i, ((k, cfg), name) in enumerate(zip(cells, _cell_names(cells), strict=True)):
             batch = MissionBatch(
-                envs_per_cell, backend, n_auvs, k, "random", cfg, None, nthread, "tokens"
+                envs_per_cell, backend, n_auvs, k, "random", cfg, None, 0, "tokens"
             )
             envs = slice(i * batch.n_envs, (i + 1) * batch.n_envs)
             self.cells.append(ScenarioCell(name, k, cfg, batch, envs))
         self.backend = backend
+        self._pool = (
+            ThreadPoolExecutor(nthread, thread_name_prefix="cells")
+            if nthread > 1 and backend != "kinematic"
+            else None
+        )
         self.cfg = self.cells[0].config
         """The first cell's config (N and the action mapping are every cell's)."""
         self.render_mode = None
@@ -191,7 +198,10 @@ class ScenarioVecEnv(BatchedVecEnv):
     def step_wait(self) -> VecEnvStepReturn:
         check_open(self)
         actions = np.asarray(self._actions)
-        steps = [c.batch.step(actions[c.envs]) for c in self.cells]
+        if self._pool is None:
+            steps = [c.batch.step(actions[c.envs]) for c in self.cells]
+        else:
+            steps = list(self._pool.map(lambda c: c.batch.step(actions[c.envs]), self.cells))
         infos = [
             i for c, s in zip(self.cells, steps, strict=True) for i in step_infos(s, c.batch.n_envs)
         ]
@@ -203,6 +213,8 @@ class ScenarioVecEnv(BatchedVecEnv):
         )
 
     def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
         for c in self.cells:
             c.batch.close()
         self.closed = True

@@ -20,9 +20,11 @@ from iout_mj.experiments.bench_training import (
     PHYSICS_BATCH,
     REPEATS,
     _worker_rate,
+    general_recipe,
     median_rate,
     memory_mb,
     ppo_fps,
+    token_ppo_fps,
 )
 from iout_mj.runtime import usable_cpus
 from iout_mj.scenarios import fixed_config
@@ -224,6 +226,13 @@ def run_all(quick: bool = False, say: Callable[[str], None] = lambda _: None) ->
         "trivial": fps[None],
     }
     result["ppo_fps_ratio"] = fps["mujoco"] / fps[None]
+    recipe = general_recipe(quick)
+    tokens = {}
+    for backend in ("kinematic", "mujoco", None):
+        say(f"general recipe PPO steps/s on {backend or 'a trivial env'}")
+        tokens[backend or "trivial"] = token_ppo_fps(backend, recipe, 1 if quick else 2)
+    result["token_ppo_steps_per_s"] = tokens
+    result["token_ppo_ratio"] = tokens["kinematic"] / tokens["trivial"]
     steps = 10 if quick else 60
     say("worker-process scaling")
     one, two = _worker_rate(1, 2, 7, steps), _worker_rate(2, 2, 7, steps)

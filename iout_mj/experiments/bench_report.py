@@ -9,6 +9,28 @@ from iout_mj.experiments.result_files import integer, load, mapping, number, num
 
 RATES = ("env_steps_per_s", "raw_slots_per_s", "ratio")
 """Each scenario's slot_vs_raw entries (and the same with the batch prefix)."""
+TOKEN_PPO = ("kinematic", "mujoco", "trivial")
+"""The general recipe's PPO steps/s entries."""
+
+
+def _token_ppo_lines(r: dict[str, Any]) -> list[tuple[str, str, str]]:
+    """(what, value, target) of the general recipe's PPO speed, if the run measured it."""
+    if "token_ppo_steps_per_s" not in r:
+        return []
+    t = r["token_ppo_steps_per_s"]
+    return [
+        (
+            "token_ppo_steps_per_s, general recipe ppo-general-n2 (kinematic / mujoco)",
+            f"{t['kinematic']:,.0f} / {t['mujoco']:,.0f}",
+            ">= 3,000 / >= 1,000",
+        ),
+        (
+            f"token_ppo_ratio (kinematic / trivial env {t['trivial']:,.0f} steps/s, same "
+            "network and spaces)",
+            f"{r['token_ppo_ratio']:.3f}",
+            ">= 0.7",
+        ),
+    ]
 
 
 def _physics_batch(r: dict[str, Any]) -> int:
@@ -55,6 +77,14 @@ def check_result(r: Any, where: str = "the benchmark result") -> None:
         0.0,
     )
     numbers(r, ("ppo_fps_ratio", "subproc_scaling", "thread_scaling", "render_fps"), where, 0.0)
+    if "token_ppo_steps_per_s" in r:  # runs since the general recipe's benchmark
+        numbers(
+            mapping(r["token_ppo_steps_per_s"], f"{where}: token_ppo_steps_per_s"),
+            TOKEN_PPO,
+            f"{where}: token_ppo_steps_per_s",
+            0.0,
+        )
+        number(r, "token_ppo_ratio", where, 0.0)
     memory = mapping(r.get("memory"), f"{where}: memory")
     numbers(memory, ("one_env_mb", "training_mb"), f"{where}: memory", 0.0)
     integer(memory, "training_envs", f"{where}: memory", 1)
@@ -89,6 +119,7 @@ def format_table(r: dict[str, Any]) -> str:
         f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {p['physics']:.0f} / trivial "
         f"{p['trivial']:.0f} steps/s; target >= 0.6); kinematic batch {p['kinematic']:.0f} steps/s"
     )
+    lines += [f"{what}: {value} (target {target})" for what, value, target in _token_ppo_lines(r)]
     lines.append(f"subproc_scaling {r['subproc_scaling']:.3f} (2 workers / 1; target >= 1.8)")
     lines.append(f"thread_scaling {r['thread_scaling']:.3f} (PhysicsVecEnv, 2 rollout threads / 1)")
     lines.append(f"render_fps {r['render_fps']:.1f} (640x480, top-down + chase, overlays)")
@@ -126,6 +157,7 @@ def format_markdown(r: dict[str, Any]) -> str:
     rows += [
         f"| ppo_fps_ratio (physics {p['physics']:.0f} / trivial {p['trivial']:.0f} steps/s; "
         f"kinematic {p['kinematic']:.0f}) | {r['ppo_fps_ratio']:.3f} | >= 0.6 |",
+        *(f"| {what} | {value} | {target} |" for what, value, target in _token_ppo_lines(r)),
         f"| subproc_scaling (2 worker processes / 1) | {r['subproc_scaling']:.3f} | >= 1.8 |",
         f"| thread_scaling (PhysicsVecEnv, 2 rollout threads / 1) | {r['thread_scaling']:.3f} | |",
         f"| render_fps 640x480 (top-down + chase, trails, links, overlay) | "

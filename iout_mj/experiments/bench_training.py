@@ -1,12 +1,15 @@
-"""Benchmarks of training: PPO steps/s against a trivial env, worker-process scaling, peak
-memory (parts of `iout-mj bench`)."""
+"""Benchmarks of training: PPO steps/s against a trivial env (the specialists' MLP and the
+general recipe's token network), worker-process scaling, peak memory (parts of
+`iout-mj bench`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 import time
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -15,9 +18,11 @@ import torch
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from iout_mj.envs import MultiAUVEnv
+from iout_mj.envs.vec_env import BatchedVecEnv
+from iout_mj.errors import UsageError
 from iout_mj.scenarios import fixed_config
 from iout_mj.training import TrainConfig, new_model, vec_env
-from iout_mj.training.trainer import make_env
+from iout_mj.training.trainer import make_env, phase_model
 
 PHYSICS_BATCH = 8
 """Environments per PhysicsVecEnv call in the benchmarks (the training configuration's)."""
@@ -73,6 +78,72 @@ def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2)
     model.learn(rollouts * rollout, reset_num_timesteps=False)
     fps = rollouts * rollout / (time.perf_counter() - t)
     venv.close()
+    return fps
+
+
+GENERAL_RECIPE = Path(__file__).resolve().parents[2] / "training/configs/ppo-general-n2.yaml"
+"""The general recipe whose PPO speed `token_ppo_fps` measures (a source checkout's)."""
+
+
+class ConstantVecEnv(BatchedVecEnv):
+    """Fixed observations, zero reward, episodes of the task's length: what PPO costs with an
+    env that costs nothing (the framework's ceiling for the same spaces and network)."""
+
+    def __init__(self, obs: np.ndarray, spaces: tuple[Any, Any], horizon: int):
+        super().__init__(len(obs), *spaces)
+        self._obs, self._horizon, self._t = obs, horizon, 0
+        self.render_mode = None
+
+    def reset(self) -> Any:
+        self._t = 0
+        return self._obs.copy()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._t += 1
+
+    def step_wait(self) -> Any:
+        done = self._t >= self._horizon
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        if done:
+            self._t = 0
+            for info in infos:
+                info["terminal_observation"] = self._obs[0]
+        dones = np.full(self.num_envs, done)
+        return self._obs.copy(), np.zeros(self.num_envs, np.float32), dones, infos
+
+    def close(self) -> None:
+        pass
+
+
+def general_recipe(quick: bool = False) -> TrainConfig:
+    """The general recipe's training config (`quick`: rollouts of 16 steps, for tests)."""
+    if not GENERAL_RECIPE.is_file():
+        raise UsageError(
+            f"the general recipe {GENERAL_RECIPE.name} is not here: the token PPO benchmark "
+            "runs from a source checkout (training/configs beside the package)"
+        )
+    cfg = TrainConfig.load(GENERAL_RECIPE)
+    return dataclasses.replace(cfg, n_steps=16, batch_size=144) if quick else cfg
+
+
+def token_ppo_fps(backend: str | None, cfg: TrainConfig, rollouts: int = 2) -> float:
+    """PPO steps/s (collection + updates) of the general recipe `cfg` (its token network,
+    scenario cells, hyperparameters and torch threads) on `backend`; None = `ConstantVecEnv`
+    holding the cells' first observations (the same node counts, so the same network cost)."""
+    torch.set_num_threads(cfg.torch_threads)
+    real = vec_env(cfg, backend or "kinematic", cfg.n_envs, cfg.seed, parallel=True)
+    if backend is None:
+        obs = real.reset()
+        spaces = (real.observation_space, real.action_space)
+        real.close()
+        real = ConstantVecEnv(obs, spaces, cfg.env.scenario.horizon_slots)
+    model = phase_model(None, cfg, real)
+    rollout = real.num_envs * cfg.n_steps
+    model.learn(rollout)  # warm up
+    t = time.perf_counter()
+    model.learn(rollouts * rollout, reset_num_timesteps=False)
+    fps = rollouts * rollout / (time.perf_counter() - t)
+    model.get_env().close()
     return fps
 
 

@@ -11,6 +11,8 @@ declares them; `TOKEN_DOCS` documents each, and the sizes below follow from the 
 
 from __future__ import annotations
 
+from functools import cache
+
 from iout_mj import native
 
 K_MAX = 30
@@ -45,6 +47,7 @@ native.require_names(
 )
 
 
+@cache
 def _part_size(part: str, others: int) -> int:
     return sum(t.fixed + t.per_auv * others for t in native.TOKENS if t.part == part)
 

@@ -89,11 +89,12 @@ def scenario_cells(cfg: TrainConfig) -> list[tuple[int, Config]]:
 
 def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bool) -> Any:
     """The training VecEnv: one batch of `n_envs` environments in this process (with tokens,
-    `n_envs` per scenario cell), for either backend; with `parallel`, the MuJoCo rollout runs
-    on one C thread per core."""
-    threads = min(n_envs, usable_cpus()) if parallel and backend == "mujoco" else 0
-    if cfg.policy == "tokens":
+    `n_envs` per scenario cell), for either backend; with `parallel`, the MuJoCo scenes step on
+    one thread per core (the batch's rollout threads; with tokens, the cells concurrently)."""
+    if cfg.policy == "tokens":  # the cells step concurrently, one thread per core
+        threads = usable_cpus() if parallel and backend == "mujoco" else 0
         return VecMonitor(ScenarioVecEnv(scenario_cells(cfg), n_envs, backend, seed, threads))
+    threads = min(n_envs, usable_cpus()) if parallel and backend == "mujoco" else 0
     kinds = {"kinematic": KinematicVecEnv, "mujoco": PhysicsVecEnv, "warp": WarpVecEnv}
     return VecMonitor(kinds[backend](n_envs, config=cfg.env_spec, seed=seed, nthread=threads))
 
@@ -257,7 +258,7 @@ def _start(cfg: TrainConfig, out: Path, resume: bool, overwrite: bool) -> None:
         raise CheckpointError(f"cannot write {out / 'config.yaml'}: {exc.strerror or exc}") from exc
 
 
-def _phase_model(model: Any, cfg: TrainConfig, venv: Any) -> Any:
+def phase_model(model: Any, cfg: TrainConfig, venv: Any) -> Any:
     """The model of a phase on `venv`: new for the first phase (or to be restored from a
     checkpoint), else the previous phase's model and statistics on the new backend."""
     # token features are scaled already (and padded with a mask): not normalised
@@ -342,7 +343,7 @@ def _train(
             phase_end = phase_start + phase.timesteps
             venv = vec_env(cfg, phase.backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
             first = model is None
-            model = _phase_model(model, cfg, venv)
+            model = phase_model(model, cfg, venv)
             if first and resume:
                 resumed = restore(model, out / "last")  # mid-phase: the running episodes too
                 if not resumed.live and index > 0:
