@@ -22,6 +22,7 @@ from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError, build_dataclass
 from iout_mj.training import imitation
 from iout_mj.training.config import TrainConfig
+from iout_mj.training.trainer import scenario_cells
 
 
 def _tokens(n: int, k: int, seed: int = 0) -> tuple[np.ndarray, object]:
@@ -140,6 +141,32 @@ def test_general_training_config_round_trips_and_rejects_bad_values(tmp_path):
     ):
         with pytest.raises(ConfigError, match=match):
             build_dataclass(TrainConfig, {**cfg.to_dict(), **bad}, "general")
+
+
+def test_a_curriculum_phase_spreads_the_same_cells_over_its_k(tmp_path):
+    cfg = TrainConfig.load(ROOT / "training/configs/ppo-general-n2-curriculum.yaml")
+    assert cfg.imitation is None and cfg.total_timesteps == 10_000_000
+    first = cfg.scenario_ks(0)
+    assert len(first) == 18 and (min(first), max(first)) == (3, 6) and first == sorted(first)
+    assert cfg.scenario_ks(2) == list(range(3, 21)) == cfg.scenario_ks()
+    ks = [k for k, _ in scenario_cells(cfg, 1)]
+    assert len(ks) == cfg.envs == 36 and (min(ks), max(ks)) == (3, 12)
+    path = tmp_path / "c.yaml"
+    path.write_text(json.dumps(cfg.to_dict()))
+    assert TrainConfig.load(path) == cfg
+    phases = cfg.to_dict()["phases"]
+    for bad, match in (
+        ([{**phases[0], "node_range": [0, 6]}], r"node_range.*\[0, 6\].*2 <= low <= high <= 30"),
+        ([{**phases[0], "node_range": [9, 6]}], "low <= high"),
+    ):
+        with pytest.raises(ConfigError, match=match):
+            build_dataclass(TrainConfig, {**cfg.to_dict(), "phases": bad}, "curriculum")
+    with pytest.raises(ConfigError, match="node_range .a curriculum over K. is for policy: tokens"):
+        build_dataclass(
+            TrainConfig,
+            {"policy": "mlp", "phases": [{"backend": "kinematic", "node_range": [3, 5]}]},
+            "mlp",
+        )
 
 
 @pytest.mark.slow

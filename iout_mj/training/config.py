@@ -7,6 +7,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from iout_mj.config import MAX_NODES, MIN_NODES, Config
 from iout_mj.scenarios import EnvSpec, resolve
 from iout_mj.schema import (
@@ -39,10 +41,21 @@ class PhaseConfig:
 
     backend: str = "mujoco"
     timesteps: int = 100_000
+    node_range: tuple[int, int] | None = None
+    """A curriculum over K (token policies): this phase's scenario cells keep their number,
+    their K spread evenly over [low, high] (`scenario_ks`); None: the config's node_range."""
 
     def __post_init__(self) -> None:
         require(self.backend in BACKENDS, "backend", self.backend, f"one of {BACKENDS}")
         in_range(self, "timesteps", 1, MAX_TIMESTEPS)
+        if self.node_range is not None:
+            lo, hi = self.node_range
+            require(
+                MIN_NODES <= lo <= hi <= MAX_NODES,
+                "node_range",
+                list(self.node_range),
+                f"[low, high] with {MIN_NODES} <= low <= high <= {MAX_NODES}, or null",
+            )
 
 
 POLICIES = ("mlp", "tokens")
@@ -195,7 +208,24 @@ class TrainConfig:
                 f"{self.envs * self.n_steps}"
             )
         if not 1 <= len(self.phases) <= 16:
-            raise ConfigError("phases: accepted a list of 1 to 16 {backend, timesteps}")
+            raise ConfigError(
+                "phases: accepted a list of 1 to 16 {backend, timesteps, node_range (optional)}"
+            )
+        if self.policy == "mlp" and any(p.node_range is not None for p in self.phases):
+            raise ConfigError(
+                "phases: node_range (a curriculum over K) is for policy: tokens; accepted null "
+                "with policy: mlp (one scenario)"
+            )
+
+    def scenario_ks(self, phase: int | None = None) -> list[int]:
+        """The K of every scenario cell of one noise model, in `phase` (None: the config's
+        node_range): as many cells as node_range spans, their K spread evenly over the
+        phase's range (a curriculum keeps the rollout's size and the policy's env count)."""
+        lo, hi = self.node_range
+        narrowed = None if phase is None else self.phases[phase].node_range
+        if narrowed is None:
+            return list(range(lo, hi + 1))
+        return [int(k) for k in np.linspace(narrowed[0], narrowed[1], hi - lo + 1).round()]
 
     @property
     def envs(self) -> int:
@@ -222,7 +252,9 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
-        d["phases"] = [dict(p) for p in d["phases"]]
+        d["phases"] = [
+            {k: list(v) if isinstance(v, tuple) else v for k, v in p.items()} for p in d["phases"]
+        ]
         d["net_arch"] = list(self.net_arch)
         d["node_range"] = list(self.node_range)
         d["noise_models"] = list(self.noise_models)

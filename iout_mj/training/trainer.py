@@ -73,9 +73,9 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
     return Monitor(env)
 
 
-def scenario_cells(cfg: TrainConfig) -> list[tuple[int, Config]]:
-    """(K, env config) of every scenario cell a general policy trains on."""
-    lo, hi = cfg.node_range
+def scenario_cells(cfg: TrainConfig, phase: int | None = None) -> list[tuple[int, Config]]:
+    """(K, env config) of every scenario cell a general policy trains on (in `phase`, whose
+    node_range may narrow K: `TrainConfig.scenario_ks`)."""
     cells = []
     for noise in cfg.noise_models:
         env = dataclasses.replace(
@@ -83,17 +83,20 @@ def scenario_cells(cfg: TrainConfig) -> list[tuple[int, Config]]:
             acoustics=dataclasses.replace(cfg.env.acoustics, noise_model=noise),
             scenario=dataclasses.replace(cfg.env.scenario, n_auvs=cfg.env_spec.n_auvs),
         )
-        cells += [(k, env) for k in range(lo, hi + 1)]
+        cells += [(k, env) for k in cfg.scenario_ks(phase)]
     return cells
 
 
-def vec_env(cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bool) -> Any:
-    """The training VecEnv: one batch of `n_envs` environments in this process (with tokens,
-    `n_envs` per scenario cell), for either backend; with `parallel`, the MuJoCo scenes step on
-    one thread per core (the batch's rollout threads; with tokens, the cells concurrently)."""
+def vec_env(
+    cfg: TrainConfig, backend: str, n_envs: int, seed: int, parallel: bool, phase: int | None = None
+) -> Any:
+    """The training VecEnv of a phase: one batch of `n_envs` environments in this process (with
+    tokens, `n_envs` per scenario cell of `phase`), for either backend; with `parallel`, the
+    MuJoCo scenes step on one thread per core (the batch's rollout threads; with tokens, the cells concurrently)."""
     if cfg.policy == "tokens":  # the cells step concurrently, one thread per core
         threads = usable_cpus() if parallel and backend == "mujoco" else 0
-        return VecMonitor(ScenarioVecEnv(scenario_cells(cfg), n_envs, backend, seed, threads))
+        cells = scenario_cells(cfg, phase)
+        return VecMonitor(ScenarioVecEnv(cells, n_envs, backend, seed, threads))
     threads = min(n_envs, usable_cpus()) if parallel and backend == "mujoco" else 0
     kinds = {"kinematic": KinematicVecEnv, "mujoco": PhysicsVecEnv, "warp": WarpVecEnv}
     return VecMonitor(kinds[backend](n_envs, config=cfg.env_spec, seed=seed, nthread=threads))
@@ -341,7 +344,8 @@ def _train(
         for index in range(state.phase, len(cfg.phases)):
             phase = cfg.phases[index]
             phase_end = phase_start + phase.timesteps
-            venv = vec_env(cfg, phase.backend, cfg.n_envs, cfg.seed * 1000 + index * 100, parallel)
+            seed = cfg.seed * 1000 + index * 100
+            venv = vec_env(cfg, phase.backend, cfg.n_envs, seed, parallel, index)
             first = model is None
             model = phase_model(model, cfg, venv)
             if first and resume:
@@ -349,7 +353,6 @@ def _train(
                 if not resumed.live and index > 0:
                     # a later phase's environments start from their seed, as in an
                     # uninterrupted run (PPO's constructor must not reseed them)
-                    seed = cfg.seed * 1000 + index * 100
                     venv.unwrapped.set_random_state(np.random.RandomState(seed))
             if first:
                 logger = run_logger(out / TENSORBOARD_DIR, model.num_timesteps + 1 if resume else 0)
