@@ -192,6 +192,38 @@ def test_training_curves_refuse_a_malformed_state(tmp_path, state, match):
         figures.training_curves([run], tmp_path / "curves.png")
 
 
+def test_training_curves_pool_the_seeds_of_a_recipe(tmp_path):
+    def run(folder, name, aoi, backends=("kinematic", "kinematic", "mujoco")):
+        path = tmp_path / folder
+        path.mkdir()
+        if name is not None:
+            (path / "config.yaml").write_text(f"name: {name}\n")
+        history = [
+            {
+                "num_timesteps": 100 * i,
+                "backend": b,
+                "mean_aoi_horizon": a,
+                "jain": 0.9,
+                "docking_rate": 1.0,
+            }
+            for i, (a, b) in enumerate(zip(aoi, backends, strict=False))
+        ]
+        (path / "state.json").write_text(json.dumps({"history": history}))
+        return path
+
+    runs = [
+        run("a", "fast", [9, 8, 7]),
+        run("b", "fast", [11, 10]),  # a seed that reached two evaluations
+        run("slow-seed3", None, [12, 12, 12]),  # no config: the folder names the recipe
+    ]
+    curves = figures.recipe_curves(runs)
+    assert set(curves) == {"fast", "slow"} and curves["fast"]["runs"] == 2
+    assert curves["fast"]["steps"].tolist() == [0, 100]
+    assert curves["fast"]["mean_aoi_horizon"].mean(axis=0).tolist() == [10, 9]
+    assert curves["fast"]["mujoco_from"] is None and curves["slow"]["mujoco_from"] == 100
+    assert figures.training_curves(runs, tmp_path / "c.png").stat().st_size > 10_000
+
+
 def _bench(tmp_path, change):
     result = json.loads(BENCH.read_text())
     change(result)

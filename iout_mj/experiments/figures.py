@@ -8,6 +8,7 @@ the mean over episodes (Student t), clipped to the measure's range.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+import yaml
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
@@ -241,24 +243,72 @@ def read_history(run: Path) -> list[dict[str, Any]]:
     return history
 
 
-def training_curves(runs: list[Path], path: Path) -> Path:
-    """Held-out evaluation during training (from each run's state.json) against steps."""
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
-    histories = [(run, read_history(run)) for run in runs]  # every file checked before drawing
+def _recipe(run: Path) -> str:
+    """The recipe of a run: its config's name (the folder's, without -seed<k>, if it has none)."""
+    try:
+        config = yaml.safe_load((run / "config.yaml").read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        config = None
+    name = config.get("name") if isinstance(config, dict) else None
+    return name if isinstance(name, str) else re.sub(r"-seed\d+$", "", run.name)
+
+
+CURVE_KEYS = ("mean_aoi_horizon", "jain", "docking_rate")
+
+
+def recipe_curves(runs: list[Path]) -> dict[str, dict[str, Any]]:
+    """Per recipe (`_recipe`): its runs' count, the steps of the evaluations every run reached,
+    each CURVE_KEYS value per run and evaluation (runs x evaluations), and where its MuJoCo
+    phase starts (None without one); every state.json checked first."""
+    histories = [(run, read_history(run)) for run in runs]
+    groups: dict[str, list[list[dict[str, Any]]]] = {}
     for run, hist in histories:
-        steps = np.array([h["num_timesteps"] for h in hist]) / 1e3
-        for ax, key in zip(axes, ("mean_aoi_horizon", "jain", "docking_rate"), strict=True):
-            ax.plot(steps, [h.get(key, h.get("docked")) for h in hist], marker=".", label=run.name)
-        kinematic = [h["num_timesteps"] / 1e3 for h in hist if h["backend"] == "kinematic"]
-        if kinematic and hist[-1]["backend"] == "mujoco":  # the fine-tuning phase starts here
-            for ax in axes:
-                ax.axvline(max(kinematic), color="gray", lw=0.8, ls=":")
-    titles = ("mean AoI over T_max (slots)", "Jain's index", "docking rate")
+        groups.setdefault(_recipe(run), []).append(hist)
+    curves = {}
+    for name, hists in groups.items():
+        length = min(len(h) for h in hists)
+        first = hists[0][:length]
+        kinematic = [e["num_timesteps"] for e in first if e["backend"] == "kinematic"]
+        curves[name] = {
+            "runs": len(hists),
+            "steps": np.array([e["num_timesteps"] for e in first]),
+            "mujoco_from": max(kinematic)
+            if kinematic and first[-1]["backend"] == "mujoco"
+            else None,
+            **{
+                key: np.array([[e.get(key, e.get("docked")) for e in h[:length]] for h in hists])
+                for key in CURVE_KEYS
+            },
+        }
+    return curves
+
+
+def training_curves(runs: list[Path], path: Path) -> Path:
+    """Held-out evaluation during training (each run's state.json) against steps: one line per
+    recipe, the mean over its runs (training seeds) with their range shaded; the MuJoCo
+    phase's start dotted."""
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    for name, c in recipe_curves(runs).items():
+        label = f"{name} ({c['runs']} seeds)" if c["runs"] > 1 else name
+        steps = c["steps"] / 1e3
+        for ax, key in zip(axes, CURVE_KEYS, strict=True):
+            (line,) = ax.plot(steps, c[key].mean(axis=0), marker=".", label=label)
+            if c["runs"] > 1:
+                ax.fill_between(
+                    steps, c[key].min(0), c[key].max(0), color=line.get_color(), alpha=0.2
+                )
+            if c["mujoco_from"] is not None:  # the fine-tuning phase starts here
+                ax.axvline(c["mujoco_from"] / 1e3, color="gray", lw=0.8, ls=":")
+    titles = ("mean AoI over T_max (slots, lower is better)", "Jain's index", "docking rate")
     for ax, title in zip(axes, titles, strict=True):
         ax.set(xlabel="training steps (thousands)", title=title)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle("PPO: deterministic evaluation on 10 held-out seeds (dotted: MuJoCo phase)")
+    fig.suptitle(
+        "PPO: deterministic evaluation on held-out seeds during training (mean over training "
+        "seeds, range shaded; dotted: MuJoCo phase)",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
