@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 import torch
 from conftest import ROOT
+from stable_baselines3.common.distributions import MultiCategoricalDistribution
 
 from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
-from iout_mj.agents.token_policy import TokenPolicy
+from iout_mj.agents.token_policy import PaddedMultiCategorical, TokenPolicy
 from iout_mj.config import Config
 from iout_mj.envs import ENV_ID
 from iout_mj.envs.batch import MissionBatch
@@ -82,6 +83,26 @@ def test_one_network_serves_every_k_and_never_picks_a_padded_node():
             1,
         )
         assert metrics["mission_slots"] >= 1
+
+
+def test_the_padded_multicategorical_is_sb3s_distribution():
+    dims = [11, 7, 30, 30, 11, 7, 30, 30]
+    torch.manual_seed(0)
+    logits = torch.randn(256, sum(dims))
+    logits[:, 20:25] = -1e8  # masked nodes of the first AET choice
+    ref = MultiCategoricalDistribution(dims).proba_distribution(logits)
+    fused = PaddedMultiCategorical(dims).proba_distribution(logits)
+    actions = ref.sample()
+    torch.testing.assert_close(fused.log_prob(actions), ref.log_prob(actions))
+    torch.testing.assert_close(fused.entropy(), ref.entropy())
+    assert torch.equal(fused.mode(), ref.mode())
+    draws = torch.stack([fused.sample() for _ in range(20)])
+    assert (draws < torch.tensor(dims)).all() and draws.min() >= 0
+    assert not ((draws[..., 2] >= 2) & (draws[..., 2] < 7)).any()  # never a masked node
+    # the draws follow the probabilities: the heading's empirical frequencies
+    p = ref.distribution[0].probs.mean(0)
+    freq = torch.bincount(draws[..., 0].flatten(), minlength=11) / draws[..., 0].numel()
+    assert (freq - p).abs().max() < 0.03
 
 
 def test_scenario_vec_env_spans_its_cells_and_restarts_episodes():
@@ -161,7 +182,7 @@ def test_a_curriculum_phase_spreads_the_same_cells_over_its_k(tmp_path):
     ):
         with pytest.raises(ConfigError, match=match):
             build_dataclass(TrainConfig, {**cfg.to_dict(), "phases": bad}, "curriculum")
-    with pytest.raises(ConfigError, match="node_range .a curriculum over K. is for policy: tokens"):
+    with pytest.raises(ConfigError, match=r"\(a curriculum over K\) is for policy: tokens"):
         build_dataclass(
             TrainConfig,
             {"policy": "mlp", "phases": [{"backend": "kinematic", "node_range": [3, 5]}]},

@@ -21,7 +21,9 @@ import itertools
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import torch
+from stable_baselines3.common.distributions import MultiCategoricalDistribution
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch import nn
 from torch.nn import functional
@@ -171,6 +173,44 @@ class TokenNet(nn.Module):
         return self._by_groups(obs, self._critic)[0]
 
 
+class PaddedMultiCategorical(MultiCategoricalDistribution):
+    """SB3's MultiCategorical computed as one padded tensor (B, dims, max size): one
+    log-softmax, one gather, one multinomial draw instead of one Categorical per action
+    dimension (8 for N = 2). The same distribution; about 5 % of PPO's time on the general
+    recipe."""
+
+    def __init__(self, action_dims: list[int]):
+        super().__init__(action_dims)
+        size = max(action_dims)
+        starts = np.cumsum([0, *action_dims[:-1]])
+        padded = [
+            [s + i if i < d else -1 for i in range(size)]
+            for s, d in zip(starts, action_dims, strict=True)
+        ]
+        self._index = torch.tensor(padded)  # -1: a padding column of MASKED_LOGIT
+        self.log_probs = torch.empty(0)
+
+    def proba_distribution(self, action_logits: torch.Tensor) -> PaddedMultiCategorical:
+        column = action_logits.new_full((action_logits.shape[0], 1), MASKED_LOGIT)
+        logits = torch.cat([action_logits, column], 1)[:, self._index]
+        self.log_probs = torch.log_softmax(logits, -1)  # (B, dims, max size)
+        return self
+
+    def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
+        return self.log_probs.gather(-1, actions.long()[..., None]).sum((1, 2))
+
+    def entropy(self) -> torch.Tensor:
+        return -(self.log_probs.exp() * self.log_probs).sum((1, 2))
+
+    def sample(self) -> torch.Tensor:
+        b, dims, size = self.log_probs.shape
+        draws = torch.multinomial(self.log_probs.exp().reshape(b * dims, size), 1, True)
+        return draws.reshape(b, dims)
+
+    def mode(self) -> torch.Tensor:
+        return self.log_probs.argmax(-1)
+
+
 class TokenPolicy(ActorCriticPolicy):
     """SB3 actor-critic over token observations (`policy_kwargs`: k_max, width)."""
 
@@ -198,6 +238,7 @@ class TokenPolicy(ActorCriticPolicy):
         self.mlp_extractor = TokenNet(**self.token_args)  # type: ignore[assignment]
 
     def _build(self, lr_schedule: Any) -> None:
+        self.action_dist = PaddedMultiCategorical(list(self.action_space.nvec))
         super()._build(lr_schedule)
         self.action_net = nn.Identity()  # the network's output is already the logits
         self.optimizer = self.optimizer_class(  # type: ignore[call-arg]

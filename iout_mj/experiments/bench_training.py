@@ -14,7 +14,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import torch
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from iout_mj.envs import MultiAUVEnv
@@ -22,7 +21,7 @@ from iout_mj.envs.vec_env import BatchedVecEnv
 from iout_mj.errors import UsageError
 from iout_mj.scenarios import fixed_config
 from iout_mj.training import TrainConfig, new_model, vec_env
-from iout_mj.training.trainer import make_env, phase_model
+from iout_mj.training.trainer import make_env, phase_model, torch_setup
 
 PHYSICS_BATCH = 8
 """Environments per PhysicsVecEnv call in the benchmarks (the training configuration's)."""
@@ -65,7 +64,7 @@ def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2)
     and vectorisation (`training.vec_env`: one in-process batch of `n_envs`); None =
     `TrivialEnv` x `n_envs`, in-process too (DummyVecEnv)."""
     cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs)
-    torch.set_num_threads(cfg.torch_threads)
+    torch_setup(cfg)
     if backend is None:
         inner = DummyVecEnv([partial(TrivialEnv, n, k)] * n_envs)
     else:
@@ -130,7 +129,7 @@ def token_ppo_fps(backend: str | None, cfg: TrainConfig, rollouts: int = 2) -> f
     """PPO steps/s (collection + updates) of the general recipe `cfg` (its token network,
     scenario cells, hyperparameters and torch threads) on `backend`; None = `ConstantVecEnv`
     holding the cells' first observations (the same node counts, so the same network cost)."""
-    torch.set_num_threads(cfg.torch_threads)
+    torch_setup(cfg)
     real = vec_env(cfg, backend or "kinematic", cfg.n_envs, cfg.seed, parallel=True)
     if backend is None:
         obs = real.reset()
