@@ -238,7 +238,8 @@ class TokenPolicy(ActorCriticPolicy):
         self.mlp_extractor = TokenNet(**self.token_args)  # type: ignore[assignment]
 
     def _build(self, lr_schedule: Any) -> None:
-        self.action_dist = PaddedMultiCategorical(list(self.action_space.nvec))
+        assert isinstance(self.action_space, gym.spaces.MultiDiscrete)
+        self.action_dist = PaddedMultiCategorical([int(v) for v in self.action_space.nvec])
         super()._build(lr_schedule)
         self.action_net = nn.Identity()  # the network's output is already the logits
         self.optimizer = self.optimizer_class(  # type: ignore[call-arg]
