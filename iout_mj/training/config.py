@@ -35,6 +35,17 @@ MAX_LAYERS, MAX_WIDTH = 8, 2048
 """net_arch: at most 8 layers of 2048 (33M parameters, 0.4 GB with Adam's moments)."""
 
 
+def require_node_range(node_range: tuple[int, int], alternative: str = "") -> None:
+    """A range of K: [low, high] within the nodes a config allows."""
+    lo, hi = node_range
+    require(
+        MIN_NODES <= lo <= hi <= MAX_NODES,
+        "node_range",
+        list(node_range),
+        f"[low, high] with {MIN_NODES} <= low <= high <= {MAX_NODES}{alternative}",
+    )
+
+
 @dataclass(frozen=True)
 class PhaseConfig:
     """One training phase on one backend."""
@@ -49,13 +60,7 @@ class PhaseConfig:
         require(self.backend in BACKENDS, "backend", self.backend, f"one of {BACKENDS}")
         in_range(self, "timesteps", 1, MAX_TIMESTEPS)
         if self.node_range is not None:
-            lo, hi = self.node_range
-            require(
-                MIN_NODES <= lo <= hi <= MAX_NODES,
-                "node_range",
-                list(self.node_range),
-                f"[low, high] with {MIN_NODES} <= low <= high <= {MAX_NODES}, or null",
-            )
+            require_node_range(self.node_range, ", or null")
 
 
 POLICIES = ("mlp", "tokens")
@@ -165,13 +170,7 @@ class TrainConfig:
             f"1 to {MAX_LAYERS} layer widths from 1 to {MAX_WIDTH}",
         )
         require(self.policy in POLICIES, "policy", self.policy, f"one of {POLICIES}")
-        lo, hi = self.node_range
-        require(
-            MIN_NODES <= lo <= hi <= MAX_NODES,
-            "node_range",
-            list(self.node_range),
-            f"[low, high] with {MIN_NODES} <= low <= high <= {MAX_NODES}",
-        )
+        require_node_range(self.node_range)
         require(
             bool(self.noise_models) and set(self.noise_models) <= set(NOISE_MODELS),
             "noise_models",
