@@ -15,6 +15,7 @@ from typing import Any
 
 import yaml
 
+from iout_mj import vehicles
 from iout_mj.paper import DEFAULT_STARTS, PAPER_LAYOUTS, Point
 from iout_mj.schema import (
     ConfigError,
@@ -50,16 +51,19 @@ MAX_DURATION_S = MAX_SUBSTEPS_PER_SLOT * MAX_TIMESTEP_S
 MAX_FLOW_STEP_M = 1.25
 """Water-relative travel of a hull in one physics timestep (fastest flow x timestep): the
 fins' lift diverges when the flow moves the hull most of its length (3 m) per step (measured
-with random manoeuvres: stable at 1.25 m, divergent at 2.5 m within 3 slots of 2500 s)."""
+with random manoeuvres: stable at 1.25 m, divergent at 2.5 m within 3 slots of 2500 s). For
+another vehicle: scaled by its length (not measured)."""
 MAX_DRAG_STEP_KG = 10.0
 """drag_factor x fastest flow x timestep, the drag's momentum change per unit speed in one
 explicit step, as a mass: a small part of the 247 kg hull, or Euler overshoots (measured:
-stable at 10 kg, divergent at 20 kg with a 40 m/s cross flow)."""
+stable at 10 kg, divergent at 20 kg with a 40 m/s cross flow). For another vehicle: scaled
+by its mass (not measured)."""
 MAX_SPECTRAL_EFFICIENCY = 64.0
 """data_rate_bps / bandwidth_hz: 2^64 - 1 is an SNR of 193 dB, beyond any modem."""
 MIN_DRAG_FACTOR_NSPM2 = 4.5
 """Half the paper's 9 N s^2/m^2: with less drag the fixed 150 N m yaw servo and the fins
-carry the hull sideways faster than V_max allows for (speed over ground up to 4.5 V_max)."""
+carry the paper's torpedo (whose drag is calibrated to it) sideways faster than V_max allows
+for (speed over ground up to 4.5 V_max). A vehicle with drag of its own has no such bound."""
 
 
 @dataclass(frozen=True)
@@ -107,14 +111,6 @@ class MotionConfig:
                 "has one output per level)",
             )
         in_range(self, "initial_speed_mps", 0.0, self.v_max_mps, "up to v_max_mps")
-        require(
-            self.drag_factor_nspm2 >= MIN_DRAG_FACTOR_NSPM2,
-            "drag_coefficient",
-            self.drag_coefficient,
-            f"rho*C_d*S/2 >= {MIN_DRAG_FACTOR_NSPM2} N s^2/m^2 (here "
-            f"{self.drag_factor_nspm2:.3g}: less drag lets the hull's own yaw manoeuvres "
-            "carry it faster than V_max)",
-        )
 
     @property
     def drag_factor_nspm2(self) -> float:
@@ -288,9 +284,19 @@ class PhysicsConfig:
     """Uniform ocean current (MuJoCo `wind`), world frame."""
     current_jitter_mps: float = 0.0
     """Per-episode random current of up to this speed, drawn from the task RNG."""
+    vehicle: str = vehicles.DEFAULT
+    """The MuJoCo hull (`iout_mj.vehicles`): 'paper-torpedo' (3 m, drag calibrated to the
+    paper's C_d S) or 'remus100' (Prestero 2001). In a config file it also sets the motion
+    values the vehicle implies (V_max, rho, C_d, S) that the file does not set itself."""
 
     def __post_init__(self) -> None:
         check_finite(self)
+        require(
+            self.vehicle in vehicles.VEHICLES,
+            "vehicle",
+            self.vehicle,
+            "one of " + ", ".join(repr(v) for v in sorted(vehicles.VEHICLES)),
+        )
         in_range(
             self,
             "timestep_s",
@@ -429,24 +435,35 @@ class Config:
             f"a divisor of scenario.slot_s={slot_s:g} s into at most {MAX_SUBSTEPS_PER_SLOT} "
             "substeps (MuJoCo records every substep of a slot)",
         )
+        hull = vehicles.get(ph.vehicle)
+        if hull.hull_drag_nspm2 is None:  # the hull's drag is the config's
+            require(
+                m.drag_factor_nspm2 >= MIN_DRAG_FACTOR_NSPM2,
+                "motion.drag_coefficient",
+                m.drag_coefficient,
+                f"rho*C_d*S/2 >= {MIN_DRAG_FACTOR_NSPM2} N s^2/m^2 (here "
+                f"{m.drag_factor_nspm2:.3g}: less drag lets the hull's own yaw manoeuvres "
+                "carry it faster than V_max)",
+            )
         flow_mps = m.v_max_mps + ph.max_current_mps
+        max_flow_step_m = MAX_FLOW_STEP_M * hull.length_m / vehicles.PAPER_TORPEDO.length_m
         require(
-            flow_mps * ph.timestep_s <= MAX_FLOW_STEP_M,
+            flow_mps * ph.timestep_s <= max_flow_step_m,
             "physics.timestep_s",
             ph.timestep_s,
-            f"at most {MAX_FLOW_STEP_M / flow_mps:.3g} s: the water passes the hull at up to "
-            f"v_max + current = {flow_mps:.3g} m/s, and more than {MAX_FLOW_STEP_M} m per step "
-            "diverges",
+            f"at most {max_flow_step_m / flow_mps:.3g} s: the water passes the hull at up to "
+            f"v_max + current = {flow_mps:.3g} m/s, and more than {max_flow_step_m:.3g} m per "
+            "step diverges",
         )
-        drag_kg = m.drag_factor_nspm2 * flow_mps * ph.timestep_s
+        drag = vehicles.hull_drag_nspm2(ph.vehicle, m.drag_factor_nspm2)
+        max_drag_kg = MAX_DRAG_STEP_KG * hull.mass_kg / vehicles.PAPER_TORPEDO.mass_kg
         require(
-            drag_kg <= MAX_DRAG_STEP_KG,
+            drag * flow_mps * ph.timestep_s <= max_drag_kg,
             "physics.timestep_s",
             ph.timestep_s,
-            f"at most {MAX_DRAG_STEP_KG / (m.drag_factor_nspm2 * flow_mps):.3g} s with drag "
-            f"rho*C_d*S/2 = {m.drag_factor_nspm2:.3g} N s^2/m^2 and flow up to {flow_mps:.3g} "
-            f"m/s (drag x flow x timestep must be at most {MAX_DRAG_STEP_KG:g} kg, or the "
-            "explicit step overshoots)",
+            f"at most {max_drag_kg / (drag * flow_mps):.3g} s with the hull's drag "
+            f"{drag:.3g} N s^2/m^2 and flow up to {flow_mps:.3g} m/s (drag x flow x timestep "
+            f"must be at most {max_drag_kg:.3g} kg, or the explicit step overshoots)",
         )
 
     def replace(self, **sections: Any) -> Config:
@@ -467,8 +484,24 @@ class Config:
         else:
             raise ConfigError(f"config file {path}: accepted suffixes .yaml, .yml, .json")
 
+    def with_vehicle(self, name: str) -> Config:
+        """A copy flying vehicle `name`, with the motion values that vehicle implies."""
+        vehicles.get(name)
+        return self.replace(
+            physics=dataclasses.replace(self.physics, vehicle=name),
+            motion=dataclasses.replace(self.motion, **vehicles.get(name).motion),
+        )
+
     @classmethod
     def from_dict(cls, data: Any) -> Config:
+        """A config from plain data; `physics.vehicle` fills the motion values the vehicle
+        implies that `data` does not set."""
+        physics = data.get("physics") if isinstance(data, dict) else None
+        name = physics.get("vehicle") if isinstance(physics, dict) else None
+        if isinstance(name, str) and name in vehicles.VEHICLES:
+            motion = data.get("motion", {})
+            if isinstance(motion, dict):
+                data = {**data, "motion": {**vehicles.get(name).motion, **motion}}
         return build_dataclass(cls, data, "config")
 
     @classmethod

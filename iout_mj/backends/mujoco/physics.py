@@ -132,7 +132,7 @@ class AUVPhysics(engine.Physics):
         """Heading (unwrapped) and speed setpoints for the low-level servos."""
         ctrl = self.data.ctrl
         ctrl[self._yaw_act] = yaw_setpoint_rad
-        ctrl[self._thrust] = vehicle.thrust_command(np.asarray(speed_setpoint_mps), self.cfg.motion)
+        ctrl[self._thrust] = vehicle.thrust_command(np.asarray(speed_setpoint_mps), self.cfg)
 
     def set_poses(self, xy_m: FloatArray, yaw_rad: FloatArray, speed_mps: FloatArray) -> None:
         """Place every AUV, moving at `speed_mps` along its heading, and zero the meters."""

@@ -1,6 +1,12 @@
-"""Builds the MuJoCo scene: N AUVs from assets/auv.xml, nodes, dock and arena, from a Config.
+"""Builds the MuJoCo scene: N AUVs of the config's vehicle, nodes, dock and arena, from a Config.
 
-The vehicle (assets/auv.xml), with its sources:
+`physics.vehicle` picks the MJCF (`iout_mj.vehicles`): 'paper-torpedo' (assets/auv.xml,
+below) or 'remus100' (assets/remus100.xml, every number cited there and in vehicles.py).
+Either way the hull's straight-ahead surge drag is set here from `hull_drag_nspm2` (the
+torpedo's: the config's rho C_d S / 2; the REMUS's: its own X_uu), the speed servo's
+feedforward uses that drag, and its thrust limit is that drag at V_max.
+
+The paper's torpedo (assets/auv.xml), with its sources:
 
 - Hull: 3.0 m x 0.32 m torpedo, rigid mass 240 kg (neutrally buoyant: its displaced volume,
   pi 0.16^2 3.0 m^3 = 0.241 m^3 of water). Gravity and buoyancy balance; motion is planar.
@@ -22,49 +28,74 @@ The vehicle (assets/auv.xml), with its sources:
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import mujoco
 import numpy as np
 
+from iout_mj import vehicles
 from iout_mj.backends.mujoco import names
-from iout_mj.config import Config, MotionConfig
+from iout_mj.config import Config
 
 AUV_DEPTH_M = -10.0
 SEABED_DEPTH_M = -30.0
 NODE_RADIUS_M = 8.0
-THRUST_GAIN_NSPM = 500.0
-"""k_v of the surge speed servo, N per (m/s) of speed error."""
+THRUST_GAIN_NSPM = vehicles.PAPER_TORPEDO.thrust_gain_nspm
+"""k_v of the torpedo's surge speed servo, N per (m/s) of speed error."""
+RUDDER = "rudder"
+"""The REMUS's rudder side force (the validation's rudder steps; idle in missions)."""
 
 
-def hull_blunt_coefficient(motion: MotionConfig, spec: mujoco.MjSpec) -> float:
-    """C_blunt of the hull ellipsoid that makes surge drag rho*C_d*S/2 * v^2."""
+def mjcf_path(cfg: Config) -> Path:
+    """The MJCF file of the config's vehicle."""
+    return names.ASSETS_DIR / vehicles.get(cfg.physics.vehicle).mjcf
+
+
+def hull_drag_nspm2(cfg: Config) -> float:
+    """Straight-ahead surge drag / v^2 of the config's hull."""
+    return vehicles.hull_drag_nspm2(cfg.physics.vehicle, cfg.motion.drag_factor_nspm2)
+
+
+def hull_drag_coefficients(cfg: Config, spec: mujoco.MjSpec) -> tuple[float, float]:
+    """(C_blunt, C_slender) of the hull ellipsoid that make straight-ahead surge drag
+    `hull_drag_nspm2` v^2: along the long axis the blunt drag is C_blunt rho pi r_y r_z v^2 and
+    the slender drag C_slender rho pi r_y (r_x - r_z) v^2 (both verified in the tests). The
+    MJCF's ratio of the two is kept; a hull without slender drag is all blunt."""
     hull = spec.geom(names.HULL_DRAG_GEOM)
-    r_y, r_z = hull.size[1], hull.size[2]
-    return motion.drag_factor_nspm2 / (motion.water_density_kgpm3 * np.pi * r_y * r_z)
+    r_x, r_y, r_z = hull.size
+    blunt, slender = hull.fluid_coefs[0], hull.fluid_coefs[1]
+    rho = cfg.motion.water_density_kgpm3
+    if slender == 0:
+        return hull_drag_nspm2(cfg) / (rho * np.pi * r_y * r_z), 0.0
+    scale = hull_drag_nspm2(cfg) / (rho * np.pi * r_y * (blunt * r_z + slender * (r_x - r_z)))
+    return blunt * scale, slender * scale
 
 
-def max_thrust_n(motion: MotionConfig) -> float:
-    """Thrust limit: the drag at V_max."""
-    return motion.drag_factor_nspm2 * motion.v_max_mps**2
+def max_thrust_n(cfg: Config) -> float:
+    """Thrust limit: the hull's drag at V_max."""
+    return hull_drag_nspm2(cfg) * cfg.motion.v_max_mps**2
 
 
-def thrust_command(speed_mps: np.ndarray, motion: MotionConfig) -> np.ndarray:
-    """Servo input for a speed setpoint: setpoint plus drag feedforward / k_v."""
-    return speed_mps + motion.drag_factor_nspm2 * np.square(speed_mps) / THRUST_GAIN_NSPM
+def thrust_command(speed_mps: np.ndarray, cfg: Config) -> np.ndarray:
+    """Servo input for a speed setpoint: setpoint plus the hull's drag feedforward / k_v."""
+    gain = vehicles.get(cfg.physics.vehicle).thrust_gain_nspm
+    return speed_mps + hull_drag_nspm2(cfg) * np.square(speed_mps) / gain
 
 
-def auv_spec(motion: MotionConfig) -> mujoco.MjSpec:
-    """The AUV alone, calibrated to `motion`."""
-    spec = mujoco.MjSpec.from_file(str(names.AUV_XML))
+def auv_spec(cfg: Config) -> mujoco.MjSpec:
+    """The config's AUV alone, its drag and speed servo set from `cfg`."""
+    spec = mujoco.MjSpec.from_file(str(mjcf_path(cfg)))
     hull = spec.geom(names.HULL_DRAG_GEOM)
     coefs = list(hull.fluid_coefs)
-    coefs[0] = hull_blunt_coefficient(motion, spec)
+    coefs[0], coefs[1] = hull_drag_coefficients(cfg, spec)
     hull.fluid_coefs = coefs
     thrust = spec.actuator(names.THRUST)
-    f_max = max_thrust_n(motion)
+    f_max = max_thrust_n(cfg)
+    gain = vehicles.get(cfg.physics.vehicle).thrust_gain_nspm
     thrust.forcerange = [-f_max, f_max]
-    thrust.ctrlrange = [0.0, float(thrust_command(np.array(motion.v_max_mps), motion))]
-    thrust.gainprm[0] = THRUST_GAIN_NSPM
-    thrust.biasprm[2] = -THRUST_GAIN_NSPM
+    thrust.ctrlrange = [0.0, float(thrust_command(np.array(cfg.motion.v_max_mps), cfg))]
+    thrust.gainprm[0] = gain
+    thrust.biasprm[2] = -gain
     return spec
 
 
@@ -133,7 +164,7 @@ def build_scene(cfg: Config) -> mujoco.MjSpec:
     _add_markers(spec, cfg)
     for i in range(cfg.scenario.n_auvs):
         frame = spec.worldbody.add_frame(pos=[0.0, 0.0, AUV_DEPTH_M])
-        spec.attach(auv_spec(cfg.motion), prefix=names.auv_prefix(i), frame=frame)
+        spec.attach(auv_spec(cfg), prefix=names.auv_prefix(i), frame=frame)
         # The area's edges are a fence: joint limits the vehicle stops against.
         for joint, side in (
             (names.JOINT_X, cfg.scenario.area_m[0]),
