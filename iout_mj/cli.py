@@ -25,6 +25,7 @@ from iout_mj.backends.registry import SINGLE_ENV_BACKENDS as BACKENDS
 from iout_mj.cli_args import int_at_least, int_between, positive_distance, positive_seconds
 from iout_mj.errors import IoutError
 from iout_mj.scenarios import LAYOUTS
+from iout_mj.vehicles import VEHICLES
 
 BASELINES = ("greedy", "round-robin", "random-walk", "planner", "comm-first", "tour-scheduler")
 """The names of `agents.registry.POLICIES`, in its order."""
@@ -157,6 +158,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.add_argument("--out", default="renders", help="folder for energy_validation.png")
     p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
+    p.add_argument(
+        "--vehicle",
+        choices=sorted(VEHICLES),
+        help="the hull (default: the config's physics.vehicle); remus100 adds the checks "
+        "against published data and the paper's C_d S",
+    )
     p.set_defaults(func="cmd_validate_energy")
 
     p = sub.add_parser("mission", help="one mission: metrics, trajectory figure, video", **fmt)

@@ -73,15 +73,17 @@ def cmd_validate_energy(args: argparse.Namespace) -> int:
     from iout_mj.experiments import energy_validation  # heavy: see the module docstring
 
     cfg = fixed_config(1, 7, load_config(args.config))
+    if args.vehicle is not None:
+        cfg = cfg.with_vehicle(args.vehicle)
     out = writable_dir(Path(args.out))
     figure = out / "energy_validation.png"
     print("validate-energy: steady state, manoeuvres, timestep test (about 5 s)", file=sys.stderr)
     with output_lock(out, "validate-energy"):
-        result = energy_validation.validate(cfg, figure=figure)
+        result = energy_validation.validate_vehicle(cfg, figure=figure)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(energy_validation.format_table(result))
+        print(energy_validation.format_vehicle_table(result))
         print(f"\nfigure: {figure}")
     return 0
 

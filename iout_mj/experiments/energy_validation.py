@@ -7,6 +7,12 @@ Steady state: one AUV holds each speed; measured electrical power = mean |thrust
 velocity| / eta_prop + H. Manoeuvres: setpoint sequences (one entry per 25 s slot), measured
 energy per slot (thrust and yaw, over eta_prop, plus H) against the paper's eq. 13 with the
 slot's commanded speed and measured distance. Timestep: every manoeuvre again at dt / 4.
+
+The REMUS 100 (`physics.vehicle: remus100`) is also checked against published data, not
+against itself (`published_checks`): its steady speed under Prestero's propeller thrust, its
+drag against MSS's, and a +4 deg rudder step (yaw rate, surge, sway, turning circle) against
+Prestero's figures; and the cubic model runs against it twice: with the C_d S fitted to its
+own steady drag, and with the paper's C_d S (`validate_vehicle`).
 """
 
 from __future__ import annotations
@@ -19,12 +25,15 @@ from typing import Any
 
 import numpy as np
 
+from iout_mj import vehicles
 from iout_mj.agents.registry import make_policy
 from iout_mj.backends.kinematic import KinematicEnvironment
+from iout_mj.backends.mujoco import names, vehicle
 from iout_mj.backends.mujoco.physics import AUVPhysics
 from iout_mj.config import Config
 from iout_mj.experiments.figures import energy_validation_figure
 from iout_mj.scenarios import make_config
+from iout_mj.schema import ConfigError
 from iout_mj.world import propulsion
 
 STEADY_POINTS = 8
@@ -108,6 +117,15 @@ def maneuvers(cfg: Config | None = None) -> list[Maneuver]:
         Maneuver(f"slowdown {fast:g} m/s to dock", fast, (0.0,) * len(slowdown), slowdown),
         _mission_maneuver(cfg),
     ]
+
+
+def _accepts_timestep(cfg: Config, dt_s: float) -> bool:
+    """Whether the config's checks allow timestep `dt_s` (a short hull allows less)."""
+    try:
+        cfg.replace(physics=dataclasses.replace(cfg.physics, timestep_s=dt_s))
+    except ConfigError:
+        return False
+    return True
 
 
 def _physics(cfg: Config, dt_s: float) -> AUVPhysics:
@@ -216,9 +234,10 @@ def validate(cfg: Config | None = None, figure: Path | None = None) -> dict[str,
             }
         )
         traces.append((man.name, r))
-    changes = {dt: timestep_change(cfg, mans, dt) for dt in TIMESTEP_CANDIDATES_S}
+    candidates = [dt for dt in TIMESTEP_CANDIDATES_S if _accepts_timestep(cfg, dt)]
+    changes = {dt: timestep_change(cfg, mans, dt) for dt in candidates}
     ok = [dt for dt, c in changes.items() if c < CONVERGENCE_TOL]
-    chosen = max(ok) if ok else min(TIMESTEP_CANDIDATES_S)
+    chosen = max(ok) if ok else min(candidates)
     result = {
         "steady": steady,
         "maneuvers": man_rows,
@@ -264,5 +283,181 @@ def format_table(result: dict[str, Any]) -> str:
         "",
         f"Timestep: largest dt with < 1% change when quartered: {ts['dt_s']} s "
         f"({ts['rel_change_quarter_dt']:.3%}); {cands}",
+    ]
+    return "\n".join(lines)
+
+
+# Published REMUS 100 figures (Prestero 2001, "P"; Fossen's MSS remus100.m, "MSS").
+PRESTERO_THRUST_N = 3.86
+"""Propeller thrust at 1500 rpm, P Table C.9."""
+PRESTERO_SPEED_MPS = 1.54
+"""Steady speed at 1500 rpm, P Table 8.1 (and Section 8.1.1)."""
+RUDDER_STEP_DEG = 4.0
+"""P Figs. 8-1 to 8-3: rudder +4 deg at 1500 rpm from the 1.54 m/s trim."""
+PRESTERO_TURN = {"yaw_rate_dps": 9.0, "surge_mps": 1.39, "sway_mps": 0.07}
+"""P Figs. 8-1 to 8-3 as read off the figures: mean yaw rate 25-38 s 9.0 deg/s, surge in the
+turn 1.38-1.40 m/s, sway about 0.07 m/s (signs dropped: P's axes are starboard and down)."""
+MSS_DRAG_KGPM = 0.5 * 1026.0 * 0.42 * math.pi * (0.19 / 2) ** 2
+"""MSS remus100.m: Cd = 0.42 (Allen et al. 2000) on the frontal area pi (D/2)^2, D = 0.19 m,
+rho = 1026 kg/m^3: 6.13 kg/m."""
+Y_UUDR_KGPM = 9.64
+"""Rudder lift, P Appendix B (Y_uudr, per radian)."""
+TURN_SETTLE_S, TURN_MEASURE_S = 60.0, 60.0
+
+
+def turning_diameter_m(speed_mps: float, yaw_rate_dps: float) -> float:
+    """Diameter of the steady turn: 2 U / r."""
+    return 2.0 * speed_mps / math.radians(abs(yaw_rate_dps))
+
+
+def _constant_thrust(physics: AUVPhysics, thrust_n: float) -> None:
+    """Turn the speed servo into a constant force and the heading servo off (open loop)."""
+    m = physics.model.ptr
+    for name, bias0 in ((names.THRUST, thrust_n), (names.YAW_ACTUATOR, 0.0)):
+        i = m.actuator(names.auv_prefix(0) + name).id
+        m.actuator_gainprm[i, :] = 0.0
+        m.actuator_biasprm[i, :] = 0.0
+        m.actuator_biasprm[i, 0] = bias0
+        m.actuator_forcerange[i] = [-abs(bias0), abs(bias0)]
+
+
+def _body_velocity(physics: AUVPhysics) -> tuple[float, float, float]:
+    """Surge, sway (to port) and yaw rate of AUV 0."""
+    yaw = float(physics.yaw_rad()[0])
+    vx, vy = physics.velocities_mps()[0]
+    r = float(physics.data.ptr.qvel[physics._vyaw[0]])
+    return (
+        float(np.cos(yaw) * vx + np.sin(yaw) * vy),
+        float(-np.sin(yaw) * vx + np.cos(yaw) * vy),
+        r,
+    )
+
+
+def rudder_step(cfg: Config, rudder_deg: float = RUDDER_STEP_DEG) -> dict[str, float]:
+    """P's rudder step in MuJoCo: from P's steady speed under P's thrust, a rudder side force
+    Y_uudr u^2 delta at the fins (updated every substep from the measured surge); the turn's
+    means over TURN_MEASURE_S after TURN_SETTLE_S."""
+    physics = _physics(cfg, cfg.physics.timestep_s)
+    _constant_thrust(physics, PRESTERO_THRUST_N)
+    physics.set_poses(np.array([[500.0, 500.0]]), np.zeros(1), np.array([PRESTERO_SPEED_MPS]))
+    rudder = physics.model.ptr.actuator(names.auv_prefix(0) + vehicle.RUDDER).id
+    delta = math.radians(rudder_deg)
+    settle = round(TURN_SETTLE_S / physics.dt_s)
+    samples = []
+    for k in range(settle + round(TURN_MEASURE_S / physics.dt_s)):
+        u, v, r = _body_velocity(physics)
+        physics.data.ptr.ctrl[rudder] = -Y_UUDR_KGPM * u * u * delta  # to starboard: P's +
+        physics.step(1)
+        if k >= settle:
+            samples.append(_body_velocity(physics))
+    physics.free()
+    u, v, r = np.mean(samples, axis=0)
+    speed = float(math.hypot(u, v))
+    return {
+        "surge_mps": float(u),
+        "sway_mps": float(abs(v)),
+        "yaw_rate_dps": float(abs(math.degrees(r))),
+        "turning_diameter_m": turning_diameter_m(speed, math.degrees(r)),
+    }
+
+
+def steady_speed_under_thrust(cfg: Config, thrust_n: float) -> float:
+    """Steady surge speed of AUV 0 under a constant propeller force."""
+    physics = _physics(cfg, cfg.physics.timestep_s)
+    _constant_thrust(physics, thrust_n)
+    physics.set_poses(np.array([[100.0, 500.0]]), np.zeros(1), np.zeros(1))
+    physics.step(round(2 * SETTLE_S / physics.dt_s))
+    speed = float(physics.surge_mps()[0])
+    physics.free()
+    return speed
+
+
+def published_checks(cfg: Config) -> list[dict[str, Any]]:
+    """The vehicle in MuJoCo against published figures: rows of quantity, MuJoCo, published
+    value and its source."""
+    speed = steady_speed_under_thrust(cfg, PRESTERO_THRUST_N)
+    drag = vehicle.hull_drag_nspm2(cfg)
+    turn = rudder_step(cfg)
+    p_turn = PRESTERO_TURN
+    p_diameter = turning_diameter_m(
+        math.hypot(p_turn["surge_mps"], p_turn["sway_mps"]), p_turn["yaw_rate_dps"]
+    )
+    v = PRESTERO_SPEED_MPS
+    rows = [
+        ("steady speed at 3.86 N thrust, m/s", speed, v, "Prestero Tables C.9, 8.1"),
+        ("drag at 1.54 m/s, N", drag * v**2, MSS_DRAG_KGPM * v**2, "MSS remus100.m (Cd 0.42)"),
+        (
+            "rudder +4 deg: yaw rate, deg/s",
+            turn["yaw_rate_dps"],
+            p_turn["yaw_rate_dps"],
+            "P Fig. 8-3",
+        ),
+        ("rudder +4 deg: surge, m/s", turn["surge_mps"], p_turn["surge_mps"], "P Fig. 8-2"),
+        ("rudder +4 deg: sway, m/s", turn["sway_mps"], p_turn["sway_mps"], "P Fig. 8-2"),
+        (
+            "rudder +4 deg: turning diameter, m",
+            turn["turning_diameter_m"],
+            p_diameter,
+            "2 U / r of P Figs. 8-2, 8-3",
+        ),
+    ]
+    return [
+        {
+            "quantity": q,
+            "mujoco": float(m),
+            "published": float(p),
+            "rel_error": float((m - p) / p),
+            "source": src,
+        }
+        for q, m, p, src in rows
+    ]
+
+
+def paper_cd_s(cfg: Config) -> Config:
+    """`cfg` with the paper's C_d and S in the cubic model (the hull keeps its own drag)."""
+    paper = Config().motion
+    return cfg.replace(
+        motion=dataclasses.replace(
+            cfg.motion,
+            drag_coefficient=paper.drag_coefficient,
+            wetted_area_m2=paper.wetted_area_m2,
+        )
+    )
+
+
+def validate_vehicle(cfg: Config, figure: Path | None = None) -> dict[str, Any]:
+    """`validate` for the config's vehicle; for a vehicle with drag of its own (the REMUS) also
+    the published checks and the cubic model with the paper's C_d S."""
+    result = validate(cfg, figure=figure)
+    if vehicles.get(cfg.physics.vehicle).hull_drag_nspm2 is not None:
+        result["vehicle"] = cfg.physics.vehicle
+        result["published"] = published_checks(cfg)
+        paper = validate(paper_cd_s(cfg))
+        result["paper_cd_s"] = {k: paper[k] for k in ("steady", "maneuvers")}
+    return result
+
+
+def format_vehicle_table(result: dict[str, Any]) -> str:
+    """`format_table`, then the published checks and the paper's C_d S where there are any."""
+    if "published" not in result:  # the calibrated torpedo: the table alone, as before
+        return format_table(result)
+    lines = [
+        f"Vehicle: {result['vehicle']}, cubic model with C_d S fitted to its steady drag",
+        "",
+        format_table(result),
+        "",
+        "Against published data (Prestero 2001 = P; Fossen's MSS remus100.m)",
+        f"{'quantity':<36} {'MuJoCo':>8} {'published':>9} {'rel.err':>8}  source",
+    ]
+    for r in result["published"]:
+        lines.append(
+            f"{r['quantity']:<36} {r['mujoco']:>8.3f} {r['published']:>9.3f} "
+            f"{r['rel_error']:>+8.1%}  {r['source']}"
+        )
+    paper = format_table({**result["paper_cd_s"], "timestep": result["timestep"]})
+    lines += [
+        "",
+        "The same hull against the cubic model with the paper's C_d S (0.006 x 3 m^2)",
+        paper.split("\n\nTimestep")[0],
     ]
     return "\n".join(lines)
