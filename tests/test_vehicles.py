@@ -18,7 +18,7 @@ REMUS = Config().with_vehicle("remus100")
 
 
 def test_an_unknown_vehicle_is_refused_naming_the_accepted_ones():
-    with pytest.raises(ConfigError, match="physics.vehicle") as err:
+    with pytest.raises(ConfigError, match=r"physics\.vehicle") as err:
         Config.from_dict({"physics": {"vehicle": "remus"}})
     assert "'paper-torpedo', 'remus100'" in str(err.value)
     with pytest.raises(ConfigError, match="paper-torpedo, remus100"):
