@@ -343,6 +343,7 @@ def cmd_list(args: argparse.Namespace) -> int:
     from iout_mj.agents.shipped import shipped_policies
     from iout_mj.backends.registry import BACKENDS
     from iout_mj.scenarios import SCENARIOS
+    from iout_mj.vehicles import VEHICLES
 
     listing = {
         "scenarios": {k: f"K = {s.n_nodes}, layout {s.layout}" for k, s in SCENARIOS.items()},
@@ -357,7 +358,7 @@ def cmd_list(args: argparse.Namespace) -> int:
             "random": "a new layout every episode",
             "custom": "a config's own scenario.nodes_m, or --nodes-file",
         },
-        "vehicles": {"paper-torpedo": "assets/auv.xml, the paper's C_d and S (the only hull)"},
+        "vehicles": {v.name: v.summary for v in VEHICLES.values()},
     }
     if args.json:
         print(json.dumps(listing, indent=2))
