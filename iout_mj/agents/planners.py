@@ -157,6 +157,10 @@ class TourScheduler:
         offsets = np.stack([np.cos(angles), np.sin(angles)], 1) * (mission.n_auvs > 1)
         return centre + LOITER_SPREAD_M * offsets
 
+    def _waypoints(self, mission: Mission, targets_m: FloatArray) -> FloatArray:
+        """Where each AUV steers on its way to its target: straight at it."""
+        return targets_m
+
     @staticmethod
     def _final_speed(mission: Mission) -> float:
         """Speed of the final approach: FINAL_APPROACH_MPS through the water plus the current's
@@ -204,6 +208,7 @@ class TourScheduler:
         targets = np.array(
             [nodes[t[0]] if t else loiter_at[i] for i, t in enumerate(self._tours)], dtype=float
         ).reshape(n, 2)
+        targets = self._waypoints(mission, targets)
         dist = np.linalg.norm(targets - s.positions_m, axis=1)
         speed = approach_speed(dist, slot_s)
         loiter = ~touring & (dist < 2 * NODE_REACHED_M)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from iout_mj.agents.baselines import Greedy, Planner, Policy, RandomWalk, RoundRobin
 from iout_mj.agents.planners import CommunicationFirst, TourScheduler
+from iout_mj.agents.solver_planner import SolverTour
 
 POLICIES: dict[str, type[Policy]] = {
     "greedy": Greedy,
@@ -12,6 +13,7 @@ POLICIES: dict[str, type[Policy]] = {
     "planner": Planner,
     "comm-first": CommunicationFirst,
     "tour-scheduler": TourScheduler,
+    "solver-tour": SolverTour,
 }
 
 
