@@ -39,9 +39,6 @@ BISECTION_STEPS = 5
 """Solves that bisect the longest route after the first, unconstrained one (N > 1)."""
 BISECTION_TOLERANCE = 0.02
 """Stop bisecting when the bounds on the longest route are this close (relative)."""
-REACH_M = 100.0
-"""A node is charged from about this far (3.3 J in one slot at 100 m, 1 J needed): a leg
-between nodes is modelled this much shorter at either end."""
 DOCK_CLEARANCE_M = 50.0
 """Tours and flights keep this far outside the dock zone (entering it docks an AUV for good)."""
 DETOUR_FACTOR = np.sqrt(2.0)
@@ -94,9 +91,8 @@ def _problem(
     n = len(starts_m)
     points = np.concatenate([starts_m, dock_m[None], nodes_m])
     legs = leg_lengths_m(points, dock_m, clear_m)
-    is_node = np.arange(len(points)) > n
-    shorter = REACH_M * (is_node[:, None].astype(float) + is_node[None, :])
-    legs = np.rint(np.maximum(legs - shorter, 1.0)).astype(int)
+    legs[:, n] = np.linalg.norm(points - dock_m, axis=1)  # into the dock: straight in
+    legs = np.rint(legs).astype(int)
     model = pyvrp.Model()
     locations = [model.add_location(x=float(x), y=float(y)) for x, y in points]
     depots = [model.add_depot(location) for location in locations[: n + 1]]
