@@ -27,7 +27,15 @@ from iout_mj.errors import IoutError
 from iout_mj.scenarios import LAYOUTS
 from iout_mj.vehicles import VEHICLES
 
-BASELINES = ("greedy", "round-robin", "random-walk", "planner", "comm-first", "tour-scheduler")
+BASELINES = (
+    "greedy",
+    "round-robin",
+    "random-walk",
+    "planner",
+    "comm-first",
+    "tour-scheduler",
+    "solver-tour",
+)
 """The names of `agents.registry.POLICIES`, in its order."""
 MAX_FRAME_PX = (1920, 1080)
 """The offscreen framebuffer of the scene (`offwidth`, `offheight` of assets/arena.xml)."""
