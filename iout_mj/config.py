@@ -183,6 +183,100 @@ class AcousticsConfig:
         in_range(self, "wind_speed_mps", 0.0, 100.0)
 
 
+CHANNEL_FEATURES = ("depth", "propagation", "packets", "interference", "fading")
+"""The acoustic channel's optional features (`ChannelConfig.features`)."""
+MODULATIONS = ("bpsk", "bfsk")
+"""The uplink's modulations with a closed-form BER in AWGN (`acoustics.bit_error_rate`)."""
+FADING_MODELS = ("rayleigh", "rician")
+MAX_PACKETS_PER_SLOT = 1000
+"""Packets of one data period: the compiled binomial draw sums (1 - p)^n, which stays above
+float64's smallest normal (2e-308) for n up to 1000 at p <= 1/2."""
+MACKENZIE_RANGE = "Mackenzie (1981)'s range of validity"
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """The acoustic network layer on top of the paper's link budget (off by default: the
+    paper's deterministic, two-dimensional channel). Formulas and sources in
+    `world.acoustics` and `world.network`."""
+
+    features: tuple[str, ...] = ()
+    """Features turned on, any of 'depth' (slant ranges from the depths below), 'propagation'
+    (the handshake's travel times shorten the data period), 'packets' (packet errors from the
+    modulation's BER at the link's SINR), 'interference' (simultaneous uplinks add to each
+    other's noise), 'fading' (small-scale fading and log-normal shadowing per link and slot);
+    () is the paper's channel."""
+    node_depth_m: float = 100.0
+    """Seabed depth of every node (a layout may give its own later). Default: the shallow
+    shelf of the paper's coastal IoUT setting (ours; the paper is two-dimensional)."""
+    auv_depth_m: float = 50.0
+    """Operating depth of every AUV (ours: mid-water over the default seabed)."""
+    temperature_degc: float = 10.0
+    """Water temperature for the sound speed (Mackenzie 1981): a temperate-shelf mean (ours)."""
+    salinity_ppt: float = 35.0
+    """Salinity for the sound speed (Mackenzie 1981): standard sea water (parts per thousand)."""
+    handshake_legs: int = 3
+    """One-way propagation legs of the handshake inside the data period: the AUV's poll to
+    the node, the node's packets back, the AUV's block acknowledgement to the node (3)."""
+    modulation: str = "bpsk"
+    """The uplink's modulation, for the BER at Eb/N0 = SINR B / R: 'bpsk' (coherent,
+    0.5 erfc(sqrt(Eb/N0))) or 'bfsk' (non-coherent, 0.5 exp(-Eb/2N0)); Proakis, Digital
+    Communications, 5th ed., sections 4.3 and 4.5."""
+    packet_bits: int = 1000
+    """Bits per packet, header included (ours: a 125-byte frame)."""
+    delivery_share: float = 0.0
+    """Share of a data period's packets that must arrive for the update to count as a
+    delivery (AoI, K_reset); at least one packet always (0: any packet carries the update)."""
+    fading_model: str = "rayleigh"
+    """Small-scale fading of the 'fading' feature: 'rayleigh' or 'rician' (with
+    rician_k_db); unit mean power gain."""
+    rician_k_db: float = 10.0
+    """Rician K factor (direct over scattered power) of 'rician' fading."""
+    shadowing_sigma_db: float = 0.0
+    """Standard deviation of the log-normal shadowing of the 'fading' feature (0: none)."""
+
+    def __post_init__(self) -> None:
+        check_finite(self)
+        unknown = [f for f in self.features if f not in CHANNEL_FEATURES]
+        require(
+            not unknown and len(set(self.features)) == len(self.features),
+            "features",
+            self.features,
+            "distinct names among " + ", ".join(repr(f) for f in CHANNEL_FEATURES),
+        )
+        for name in ("node_depth_m", "auv_depth_m"):
+            in_range(self, name, 0.0, 8000.0, MACKENZIE_RANGE)
+        require(
+            self.auv_depth_m <= self.node_depth_m,
+            "auv_depth_m",
+            self.auv_depth_m,
+            f"a depth at most node_depth_m={self.node_depth_m:g} (above the seabed)",
+        )
+        in_range(self, "temperature_degc", 2.0, 30.0, MACKENZIE_RANGE)
+        in_range(self, "salinity_ppt", 25.0, 40.0, MACKENZIE_RANGE)
+        in_range(self, "handshake_legs", 0, 10)
+        require(
+            self.modulation in MODULATIONS,
+            "modulation",
+            self.modulation,
+            "one of " + ", ".join(repr(m) for m in MODULATIONS),
+        )
+        in_range(self, "packet_bits", 8, 10**7)
+        in_range(self, "delivery_share", 0.0, 1.0)
+        require(
+            self.fading_model in FADING_MODELS,
+            "fading_model",
+            self.fading_model,
+            "one of " + ", ".join(repr(m) for m in FADING_MODELS),
+        )
+        in_range(self, "rician_k_db", -20.0, 40.0, "Rayleigh-like to nearly line of sight")
+        in_range(self, "shadowing_sigma_db", 0.0, 20.0)
+
+    def on(self, feature: str) -> bool:
+        """Whether `feature` (one of CHANNEL_FEATURES) is turned on."""
+        return feature in self.features
+
+
 @dataclass(frozen=True)
 class NetworkConfig:
     """Sensor-node state rules (paper section III-A; open values from the authors' code)."""
@@ -406,10 +500,12 @@ class Config:
     network: NetworkConfig = field(default_factory=NetworkConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    channel: ChannelConfig = field(default_factory=ChannelConfig)
 
     def __post_init__(self) -> None:
         """Bounds that join sections."""
         slot_s, m, ph = self.scenario.slot_s, self.motion, self.physics
+        self._check_channel()
         for name in ("charging_s", "data_s"):
             value = getattr(self.acoustics, name)
             require(
@@ -465,6 +561,29 @@ class Config:
             f"{drag:.3g} N s^2/m^2 and flow up to {flow_mps:.3g} m/s (drag x flow x timestep "
             f"must be at most {max_drag_kg:.3g} kg, or the explicit step overshoots)",
         )
+
+    def _check_channel(self) -> None:
+        """The channel's bounds that involve the acoustics section."""
+        ch, ac = self.channel, self.acoustics
+        if ch.on("packets"):
+            packets = math.floor(ac.data_rate_bps * ac.data_s / ch.packet_bits)
+            require(
+                1 <= packets <= MAX_PACKETS_PER_SLOT,
+                "channel.packet_bits",
+                ch.packet_bits,
+                f"a size that fits 1 to {MAX_PACKETS_PER_SLOT} packets into one data period "
+                f"(acoustics.data_rate_bps x data_s = {ac.data_rate_bps * ac.data_s:g} bits)",
+            )
+        if ch.on("interference"):
+            gap_hz = abs(ac.f_wet_khz - ac.f_data_khz) * 1000.0
+            require(
+                gap_hz > ac.bandwidth_hz / 2,
+                "acoustics.f_wet_khz",
+                ac.f_wet_khz,
+                "an AET frequency outside the data band f_data_khz +- bandwidth_hz / 2 with "
+                "channel interference on (the model leaves the AET tone out of the uplinks' "
+                "noise, which holds only out of band)",
+            )
 
     def replace(self, **sections: Any) -> Config:
         """A copy with some sections replaced, e.g. `cfg.replace(scenario=...)`."""

@@ -13,6 +13,7 @@
 
 #define PARAMS_VALUE(type, name) VALUE(Params, type, name)
 #define LINK_VALUE(type, name) VALUE(Link, type, name)
+#define CHANNEL_VALUE(type, name) VALUE(Channel, type, name)
 #define NETWORK_POINTER(type, name) POINTER(Network, type, name)
 #define STATE_POINTER(type, name) POINTER(State, type, name)
 #define LOG_POINTER(type, name) POINTER(Log, type, name)
@@ -23,6 +24,7 @@
 static const IoutDecl DECLS[] = {
     IOUT_PARAMS(PARAMS_VALUE) SIZEOF(Params)
     IOUT_LINK(LINK_VALUE) SIZEOF(Link)
+    IOUT_CHANNEL(CHANNEL_VALUE) SIZEOF(Channel)
     IOUT_NETWORK(NETWORK_POINTER) SIZEOF(Network)
     IOUT_STATE(STATE_POINTER) SIZEOF(State)
     IOUT_LOG(LOG_POINTER) SIZEOF(Log)

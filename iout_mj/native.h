@@ -41,14 +41,30 @@
 /* Link: the link budget's distance-independent constants (world.acoustics.LinkBudget). */
 #define IOUT_LINK(X)                                                                            \
     X(double, harvest_j) X(double, uplink_j) X(double, wet_per_m) X(double, data_per_m)         \
-    X(double, spreading) X(double, min_distance_m)
+    X(double, spreading) X(double, min_distance_m) X(double, bits_per_delivery)
+
+/* Channel: the acoustic network layer's constants (world.acoustics.ChannelConstants); every
+ * feature off (enabled 0) is the paper's channel. Flags are 0 or 1; fading is Rician with
+ * K = rician_k (0: Rayleigh). */
+#define IOUT_CHANNEL(X)                                                                         \
+    X(int64_t, enabled) X(double, dz_m) X(double, delay_s_per_m) X(double, data_s)              \
+    X(double, data_rate_bps) X(int64_t, packets) X(double, packet_bits)                         \
+    X(double, delivery_share) X(int64_t, modulation) X(double, ebn0_per_snr) X(double, snr_req) \
+    X(int64_t, interference) X(int64_t, fading) X(double, rician_k)                             \
+    X(double, shadowing_sigma_db)
+/* Modulations (channel.modulation): their BER in AWGN is in world/network.c. */
+enum { IOUT_BPSK = 0, IOUT_BFSK = 1 };
+/* Uniform draws per AUV and slot in Mission.channel_draws: the packet draw of the node it
+ * collects from, then 4 per transmitter (two Box-Muller pairs: fading, shadowing). */
+#define IOUT_CHANNEL_DRAWS(n_auvs) (1 + 4 * (n_auvs))
 
 /* Network: pointers to the node state, (B, K) unless noted (world.network.SensorNetwork).
  * X(element type, name). */
 #define IOUT_NETWORK(X)                                                                         \
     X(double, nodes_m) /* (B, K, 2) */                                                          \
     X(double, energy_j) X(double, aoi) X(int64_t, service_count) X(int64_t, deliveries)         \
-    X(double, mean_aoi) X(double, jain) /* (B,) */
+    X(double, mean_aoi) X(double, jain) /* (B,) */                                            \
+    X(double, node_bits)
 
 /* State: pointers to mission.state.MissionState's arrays, with the axes declared there. */
 #define IOUT_STATE(X)                                                                           \
@@ -72,7 +88,7 @@
     X(int64_t, n_envs) X(int64_t, n_auvs) X(int64_t, n_nodes) X(int64_t, horizon_slots)         \
     X(int64_t, heading_levels) X(int64_t, speed_levels) X(int64_t, n_obs) X(int64_t, n_path)
 #define IOUT_MISSION_CONSTANTS(X)                                                               \
-    X(const Params, p) X(const Link, link)                                                      \
+    X(const Params, p) X(const Link, link) X(const Channel, channel)                            \
     X(const double, dtheta_rad) /* (heading_levels,) */                                         \
     X(const double, dv_mps)     /* (speed_levels,) */
 #define IOUT_MISSION_STRUCTS(X) X(State, s) X(Network, net) X(Log, log)
@@ -85,7 +101,12 @@
     X(double, yaw_energy_j)       /* (B, N) of the slot */                                      \
     X(double, path_m)             /* (S, B, N, 2), S = n_path */                                \
     X(double, terms)              /* (B, reward terms) */                                       \
-    X(double, obs)                /* (B, n_obs) */
+    X(double, obs)                /* (B, n_obs) */                                              \
+    X(double, channel_draws)      /* (B, N, IOUT_CHANNEL_DRAWS(N)) uniforms in [0, 1) */        \
+    X(double, link_sinr_db)       /* (B, N) of the uplink each AUV collects (NaN: none) */      \
+    X(double, link_per)           /* (B, N) its packet error rate (NaN: none) */                \
+    X(int64_t, link_packets_sent) /* (B, N) by the node it collects from */                     \
+    X(int64_t, link_packets_received) /* (B, N) of those, arrived at any AUV */
 
 /* The reward terms, in the order of the mission's term array (mission.rewards). */
 #define IOUT_REWARD_TERMS(X)                                                                    \
@@ -118,6 +139,7 @@
 
 typedef struct { IOUT_PARAMS(IOUT_VALUE_FIELD) } Params;
 typedef struct { IOUT_LINK(IOUT_VALUE_FIELD) } Link;
+typedef struct { IOUT_CHANNEL(IOUT_VALUE_FIELD) } Channel;
 typedef struct { IOUT_NETWORK(IOUT_POINTER_FIELD) } Network;
 typedef struct { IOUT_STATE(IOUT_POINTER_FIELD) } State;
 typedef struct { IOUT_LOG(IOUT_POINTER_FIELD) } Log;
@@ -149,6 +171,13 @@ typedef struct {
     bool ending;                                  /* the episode ends with this slot */
     double aoi_after_mission; /* mean-AoI sum of the unserved slots left until T_max */
 } SlotContext;
+
+/* A slot's per-AUV link outcomes of the channel (Mission's link_* outputs of one env). */
+typedef struct {
+    const double *draws; /* (N, IOUT_CHANNEL_DRAWS(N)) */
+    double *sinr_db, *per;
+    int64_t *sent, *received;
+} LinkOutcomes;
 
 /* ----------------------------------------------------------------- the exported table */
 typedef struct {
@@ -193,15 +222,25 @@ IOUT_API int64_t iout_serve(const Network *net, int64_t e, int64_t n_envs, int64
                             int64_t node_stride, const bool *active, double *distance_m,
                             bool *uplink_ok, double *uplink_req_j, double *uplink_stored_j,
                             double *harvested_j, bool *delivered);
+IOUT_API int64_t iout_serve_channel(const Network *net, int64_t e, int64_t n_envs, int64_t n,
+                                    int64_t k, const Link *link, const Channel *ch,
+                                    int64_t k_reset, double aoi_max, const double *auv_xy,
+                                    const int64_t *wet, const int64_t *data, const bool *active,
+                                    const double *draws, double *distance_m, bool *uplink_ok,
+                                    double *sinr_db, double *per, int64_t *sent,
+                                    int64_t *received);
+IOUT_API int64_t iout_packet_error_rates(const Channel *ch, const double *sinr, int64_t count,
+                                         double *per);
 void iout_link_energy(const Link *link, double distance_m, double *harvest_j, double *uplink_j);
 double iout_jain(const int64_t *counts, int64_t k);
 void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int64_t k,
-                    double *distance_m);
+                    double dz_m, double *distance_m);
 void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
-                    int64_t k_reset, double aoi_max, const double *auv_xy, const int64_t *wet,
-                    const int64_t *data, int64_t node_stride, const bool *active,
-                    double *distance_m, bool *uplink_ok, double *uplink_req_j,
-                    double *uplink_stored_j, double *harvested_j, bool *delivered);
+                    const Channel *ch, int64_t k_reset, double aoi_max, const double *auv_xy,
+                    const int64_t *wet, const int64_t *data, int64_t node_stride,
+                    const bool *active, double *distance_m, bool *uplink_ok,
+                    double *uplink_req_j, double *uplink_stored_j, double *harvested_j,
+                    bool *delivered, const LinkOutcomes *out);
 
 /* mission/rewards.c */
 double iout_slot_terms(const Params *p, const SlotContext *c, double *out);

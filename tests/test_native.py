@@ -16,7 +16,7 @@ from conftest import ROOT
 
 from iout_mj import native
 from iout_mj.backends.kinematic import move
-from iout_mj.mission import Mission
+from iout_mj.mission import Mission, rules
 from iout_mj.scenarios import make_config
 
 GUARD = 64
@@ -78,7 +78,8 @@ def test_every_pointer_of_the_view_is_an_owned_guarded_buffer(guarded, n_envs):
     m.reset(np.random.RandomState(0))
     move(m, np.tile(STRAIGHT * 2, (n_envs, 1)) if n_envs else np.array(STRAIGHT * 2))
     pointers = _pointers(m._view)
-    assert len(pointers) == sum(len(native.FIELDS[s]) for s in ("State", "Log", "Network")) + 13
+    own = len(rules.CONSTANTS) + len(rules.INPUTS)  # 5 constants, 14 slot buffers
+    assert len(pointers) == sum(len(native.FIELDS[s]) for s in ("State", "Log", "Network")) + own
     assert {k for k, v in pointers.items() if not guarded.owns(v)} == set()
     assert guarded.intact()
 
@@ -117,7 +118,14 @@ def test_arrays_the_rules_point_to_cannot_be_rebound(target, name):
 
 
 @pytest.mark.parametrize(
-    "array", ["params", "actions.dtheta_rad", "actions.dv_mps", "network.link.constants"]
+    "array",
+    [
+        "params",
+        "actions.dtheta_rad",
+        "actions.dv_mps",
+        "network.link.constants",
+        "network.channel.constants",
+    ],
 )
 def test_constants_the_rules_read_are_read_only(array):
     m = Mission(make_config(2, 7))

@@ -181,6 +181,7 @@ class MissionBatch:
         live = self._live_arrays()
         rng = {f"random.{k}": v for k, v in rng_arrays(self.random).items()}
         expected = {**live, **rng, **self._scene_arrays()}
+        arrays = self._with_node_bits(arrays)
         if set(arrays) != set(expected):
             raise ValueError(
                 f"saved batch state holds {sorted(set(arrays) ^ set(expected))} unlike this "
@@ -201,6 +202,15 @@ class MissionBatch:
             scene = np.array(arrays["physics.state"][e])
             mujoco.mj_setState(p.model.ptr, p.data.ptr, scene, PHYSICS_STATE)
             p.meter.work_j[...] = arrays["physics.work_j"][e]
+
+    def _with_node_bits(self, arrays: Mapping[str, np.ndarray]) -> Mapping[str, np.ndarray]:
+        """A state saved before the network kept its delivered bits per node gains them as
+        the paper's channel counts them (R tau_data per delivery): exact for such a state."""
+        if "network.node_bits" in arrays or "network.deliveries" not in arrays:
+            return arrays
+        deliveries = np.asarray(arrays["network.deliveries"])
+        bits = deliveries * self.mission.network.bits_per_delivery
+        return {**arrays, "network.node_bits": bits.astype(float)}
 
     def _scene_arrays(self) -> dict[str, np.ndarray]:
         """Copies of every MuJoCo scene's physics state and meter (none for kinematic)."""

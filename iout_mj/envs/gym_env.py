@@ -182,6 +182,9 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
         terminated, truncated = bool(mission.state.terminated), bool(mission.state.truncated)
         self._needs_reset = terminated or truncated
         info = {"reward_terms": mission.terms, "slot": int(mission.state.slot)}
+        channel = mission.channel_info()
+        if channel is not None:  # the channel's per-AUV uplinks (sinr_db, per, packets)
+            info["channel"] = channel
         if self._needs_reset:
             info["metrics"] = mission.metrics()
         if self.render_mode == "rgb_array_list":

@@ -36,6 +36,12 @@ from iout_mj.types import BoolArray, FloatArray
 from iout_mj.world.network import SensorNetwork, rows
 
 
+def channel_draws_per_auv(n_auvs: int) -> int:
+    """Uniforms per AUV and slot (native.h's IOUT_CHANNEL_DRAWS): the packet draw, then 4 per
+    transmitter (fading, shadowing)."""
+    return 1 + 4 * n_auvs
+
+
 class Mission(native.Frozen):
     """State and rules of one multi-AUV data-collection episode, or of B of them at once.
 
@@ -63,7 +69,9 @@ class Mission(native.Frozen):
         self.dock_m = np.asarray(sc.dock_center_m, dtype=float)
         self.inv_area = 1.0 / self.area_m
         self.actions = ActionMap(cfg, self.batch)
-        self.network = SensorNetwork(sc.nodes_m, cfg.network, cfg.acoustics, self.batch)
+        self.network = SensorNetwork(
+            sc.nodes_m, cfg.network, cfg.acoustics, self.batch, channel=cfg.channel
+        )
         self.state = MissionState.zeros(self.batch, self.n_auvs, self.n_nodes)
         self.log = MissionLog.zeros(self.batch, self.n_auvs, sc.horizon_slots)
         """Per-slot history of the episode (`MissionLog`)."""
@@ -92,6 +100,11 @@ class Mission(native.Frozen):
             "yaw_energy_j": (*b, n),
             "path_m": (0, *b, n, 2),
             "obs": (*b, sum(self.observation_sizes.values())),
+            "channel_draws": (*b, n, channel_draws_per_auv(n)),
+            "link_sinr_db": (*b, n),
+            "link_per": (*b, n),
+            "link_packets_sent": (*b, n),
+            "link_packets_received": (*b, n),
         }
         self._inputs = {k: native.allocate(shapes[k], rules.INPUTS[k]) for k in shapes}
         """The slot's buffers that the rules share with Python (`rules.INPUTS`)."""
@@ -110,6 +123,7 @@ class Mission(native.Frozen):
         constants = {
             "p": self.params,
             "link": self.network.link.constants,
+            "channel": self.network.channel.constants,
             "dtheta_rad": self.actions.dtheta_rad,
             "dv_mps": self.actions.dv_mps,
         }
@@ -145,8 +159,10 @@ class Mission(native.Frozen):
         """Start an episode in every environment (mask None) or in those where `mask` is True.
 
         Random draws, in this order: node layouts (if random per episode), position jitter,
-        heading jitter, current jitter; one row per restarted environment.
+        heading jitter, current jitter; one row per restarted environment. `rng` is the task
+        RNG: with channel packets or fading on, every slot draws its uniforms from it too.
         """
+        self._random = rng
         cfg, sc, n, s = self.cfg, self.cfg.scenario, self.n_auvs, self.state
         i = rows(mask)
         count = () if not self.batch else (self.batch[0] if mask is None else int(mask.sum()),)
@@ -195,6 +211,35 @@ class Mission(native.Frozen):
         """Check an action's shape (`ActionMap.decode`) and hand it to the rules (which check
         its ranges before they use it)."""
         self._inputs["actions"].reshape(-1)[:] = self.actions.decode(action).reshape(-1)
+        if self.network.channel.draws:
+            self._draw_channel()
+
+    def _draw_channel(self) -> None:
+        """The slot's uniforms for the channel (packets, fading), from the task RNG of the
+        last `reset`: one call, (*batch, N, IOUT_CHANNEL_DRAWS(N)) values."""
+        draws = self._inputs["channel_draws"]
+        random = getattr(self, "_random", None)
+        if random is None:
+            raise RuntimeError("the channel draws from the task RNG: call reset() first")
+        draws.reshape(-1)[:] = random.random_sample(draws.size)
+
+    def channel_info(self) -> dict[str, Any] | None:
+        """The last slot's uplinks through the channel, per AUV (arrays over the batch; lists
+        for one env): `sinr_db` and `per` of the link from the node it collects from (NaN: no
+        transmission reached it), `packets_sent` by that node and `packets_received` of them
+        (at any AUV); None on the paper's channel."""
+        if not self.network.channel.enabled:
+            return None
+        x = self._inputs
+        names = {
+            "sinr_db": "link_sinr_db",
+            "per": "link_per",
+            "packets_sent": "link_packets_sent",
+            "packets_received": "link_packets_received",
+        }
+        if self.batch:
+            return {k: x[v].copy() for k, v in names.items()}
+        return {k: x[v][0].tolist() for k, v in names.items()}
 
     def end_slot(
         self,

@@ -203,9 +203,13 @@ void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
         s->yaw_energy_j[a] += yaw_energy_j[i];
         s->battery_j[a] -= propulsion_energy_j[i] + yaw_energy_j[i] + hotel_j;
     }
-    iout_serve_env(&m->net, e, n, k, m->link, p->k_reset, p->aoi_max, positions_m,
-               s->action + 4 * a0 + 2, s->action + 4 * a0 + 3, 4, active,
-               s->distance_m + a0 * k, uplink_ok, req_j, stored_j, harvested_j, delivered);
+    LinkOutcomes out = {m->channel_draws + a0 * IOUT_CHANNEL_DRAWS(n), m->link_sinr_db + a0,
+                        m->link_per + a0, m->link_packets_sent + a0,
+                        m->link_packets_received + a0};
+    iout_serve_env(&m->net, e, n, k, m->link, m->channel, p->k_reset, p->aoi_max, positions_m,
+                   s->action + 4 * a0 + 2, s->action + 4 * a0 + 3, 4, active,
+                   s->distance_m + a0 * k, uplink_ok, req_j, stored_j, harvested_j, delivered,
+                   &out);
 
     bool all_docked = true, battery_empty = false;
     for (int64_t i = 0; i < n; i++) {
@@ -293,7 +297,7 @@ int64_t iout_start(const Mission *m, const bool *restarted)
         if (!restarted[e])
             continue;
         iout_distances(s->positions_m + 2 * n * e, n, m->net.nodes_m + 2 * k * e, k,
-                       s->distance_m + n * k * e);
+                       m->channel->dz_m, s->distance_m + n * k * e);
         for (int64_t a = e * n; a < (e + 1) * n; a++) {
             double x = s->positions_m[2 * a], y = s->positions_m[2 * a + 1];
             s->dock_dist_m[a] = hypot(x - p->dock_x_m, y - p->dock_y_m);

@@ -98,8 +98,14 @@ INPUTS = {
     "path_m": np.dtype(float),
     "terms": np.dtype(float),
     "obs": np.dtype(float),
+    "channel_draws": np.dtype(float),
+    "link_sinr_db": np.dtype(float),
+    "link_per": np.dtype(float),
+    "link_packets_sent": np.dtype(np.int64),
+    "link_packets_received": np.dtype(np.int64),
 }
-"""The slot's inputs and outputs that `Mission` shares with the rules (IOUT_MISSION_IO)."""
+"""The slot's inputs and outputs that `Mission` shares with the rules (IOUT_MISSION_IO): the
+channel's uniform draws of the slot and its per-AUV link outcomes among them."""
 SIZES = (
     "n_envs",
     "n_auvs",
@@ -111,7 +117,7 @@ SIZES = (
     "n_path",
 )
 """The sizes in a mission's view, which bound every index the rules use (checked in C)."""
-CONSTANTS = ("p", "link", "dtheta_rad", "dv_mps")
+CONSTANTS = ("p", "link", "channel", "dtheta_rad", "dv_mps")
 """The read-only constants a mission's view points to."""
 
 native.require_fields(

@@ -12,6 +12,12 @@ The combination implemented (DESIGN.md section 4; the paper's symbols):
   SL_req = gamma_req + TL + NL_band; P_trans = 10^((SL_req - 170.8 - 10 log10 eta_tx - DI_tx)/10).
 
 All functions take scalars or arrays of distances (any shape, e.g. AUVs x nodes).
+
+The acoustic network layer (`config.ChannelConfig`, off by default) adds, in the compiled
+rules (`world/network.c`), with the constants of `ChannelConstants`: slant ranges from the
+depths; the sound speed of Mackenzie (1981) and the handshake's travel times; packets whose
+error rate follows the modulation's BER at the link's SINR; interference between the uplinks
+of a slot; Rician/Rayleigh fading and log-normal shadowing. `world.network` states the rules.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from iout_mj import native
-from iout_mj.config import AcousticsConfig
+from iout_mj.config import AcousticsConfig, ChannelConfig
 from iout_mj.types import FloatArray
 
 SL_REF_DB = 170.8
@@ -138,6 +144,7 @@ class LinkBudget(native.Frozen):
             "data_per_m": float(thorp_absorption_db_per_km(cfg.f_data_khz)) * ln10 / 1e4,
             "spreading": cfg.spreading_factor,
             "min_distance_m": MIN_DISTANCE_M,
+            "bits_per_delivery": bits_per_delivery(cfg),
         }
         native.require_names("Link", tuple(sorted(LINK_DTYPE.names or ())), tuple(sorted(values)))
         constants = native.allocate((1,), LINK_DTYPE)
@@ -166,3 +173,98 @@ class LinkBudget(native.Frozen):
 def bits_per_delivery(cfg: AcousticsConfig) -> float:
     """Data delivered by one successful uplink: R * tau_data."""
     return cfg.data_rate_bps * cfg.data_s
+
+
+def mackenzie_sound_speed_mps(
+    temperature_degc: ArrayLike, salinity_ppt: ArrayLike, depth_m: ArrayLike
+) -> FloatArray:
+    """Sound speed in sea water, Mackenzie's nine-term equation (Mackenzie 1981, J. Acoust.
+    Soc. Am. 70(3):807-812; valid for T 2-30 C, S 25-40 ppt, z 0-8000 m, standard error
+    0.07 m/s; his check value: 1550.744 m/s at 25 C, 35 ppt, 1000 m):
+
+    c = 1448.96 + 4.591 T - 5.304e-2 T^2 + 2.374e-4 T^3 + 1.340 (S - 35) + 1.630e-2 z
+        + 1.675e-7 z^2 - 1.025e-2 T (S - 35) - 7.139e-13 T z^3
+    """
+    t = np.asarray(temperature_degc, dtype=float)
+    ds = np.asarray(salinity_ppt, dtype=float) - 35.0
+    z = np.asarray(depth_m, dtype=float)
+    return np.asarray(
+        1448.96
+        + 4.591 * t
+        - 5.304e-2 * t**2
+        + 2.374e-4 * t**3
+        + 1.340 * ds
+        + 1.630e-2 * z
+        + 1.675e-7 * z**2
+        - 1.025e-2 * t * ds
+        - 7.139e-13 * t * z**3
+    )
+
+
+def sound_speed_mps(cfg: ChannelConfig) -> float:
+    """The channel's sound speed: Mackenzie's at the mean of the AUV and node depths (one
+    value per config: the handshake's legs are short against the water column's structure)."""
+    depth_m = 0.5 * (cfg.auv_depth_m + cfg.node_depth_m)
+    return float(mackenzie_sound_speed_mps(cfg.temperature_degc, cfg.salinity_ppt, depth_m))
+
+
+CHANNEL_DTYPE = native.record_dtype("Channel")
+"""The channel's constants as the compiled rules read them (native.h's IOUT_CHANNEL)."""
+MODULATION_CODES = {"bpsk": 0, "bfsk": 1}
+"""native.h's IOUT_BPSK and IOUT_BFSK."""
+
+
+def channel_values(channel: ChannelConfig, cfg: AcousticsConfig) -> dict[str, float]:
+    """The Channel record's values of a config (every feature off: the paper's channel)."""
+    on = channel.on
+    snr_req = 2 ** (cfg.data_rate_bps / cfg.bandwidth_hz) - 1
+    delay = channel.handshake_legs / sound_speed_mps(channel)
+    return {
+        "enabled": int(bool(channel.features)),
+        "dz_m": channel.node_depth_m - channel.auv_depth_m if on("depth") else 0.0,
+        "delay_s_per_m": delay if on("propagation") else 0.0,
+        "data_s": cfg.data_s,
+        "data_rate_bps": cfg.data_rate_bps,
+        "packets": int(on("packets")),
+        "packet_bits": float(channel.packet_bits),
+        "delivery_share": channel.delivery_share,
+        "modulation": MODULATION_CODES[channel.modulation],
+        "ebn0_per_snr": cfg.bandwidth_hz / cfg.data_rate_bps,
+        "snr_req": snr_req,
+        "interference": int(on("interference")),
+        "fading": int(on("fading")),
+        "rician_k": 10 ** (channel.rician_k_db / 10) if channel.fading_model == "rician" else 0.0,
+        "shadowing_sigma_db": channel.shadowing_sigma_db,
+    }
+
+
+class ChannelConstants(native.Frozen):
+    """The channel's constants for the compiled rules (a read-only (1,) CHANNEL_DTYPE record)
+    and whether a slot needs uniform draws (packets or fading on)."""
+
+    def __init__(self, channel: ChannelConfig, cfg: AcousticsConfig):
+        values = channel_values(channel, cfg)
+        names = tuple(sorted(CHANNEL_DTYPE.names or ()))
+        native.require_names("Channel", names, tuple(sorted(values)))
+        record = native.allocate((1,), CHANNEL_DTYPE)
+        for name, value in values.items():
+            record[name] = value
+        self.constants = native.read_only(record)
+        self.enabled = bool(channel.features)
+        self.draws = channel.on("packets") or channel.on("fading")
+        """Whether each slot draws uniforms (`Mission.channel_draws`) from the task RNG."""
+        self._freeze()
+
+    def packet_error_rate(self, sinr_db: ArrayLike) -> FloatArray:
+        """PER = 1 - (1 - BER)^bits at each SINR (dB), BER of the channel's modulation at
+        Eb/N0 = SINR B / R, by the compiled rules' own function."""
+        sinr = np.ascontiguousarray(10 ** (np.asarray(sinr_db, dtype=float) / 10))
+        per = np.empty_like(sinr)
+        native.call(
+            native.lib.iout_packet_error_rates,
+            native.address(self.constants),
+            native.address(sinr),
+            sinr.size,
+            native.address(per),
+        )
+        return per

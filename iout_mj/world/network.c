@@ -54,31 +54,183 @@ int64_t iout_summarise(const Network *net, int64_t n_envs, int64_t k)
     return IOUT_OK;
 }
 
+/* AUV-node ranges: horizontal, or slant with the depth difference dz_m (0: the paper's). */
 void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int64_t k,
-                    double *distance_m)
+                    double dz_m, double *distance_m)
 {
     for (int64_t i = 0; i < n; i++)
-        for (int64_t j = 0; j < k; j++)
-            distance_m[i * k + j] =
-                hypot(auv_xy[2 * i] - nodes_m[2 * j], auv_xy[2 * i + 1] - nodes_m[2 * j + 1]);
+        for (int64_t j = 0; j < k; j++) {
+            double d = hypot(auv_xy[2 * i] - nodes_m[2 * j], auv_xy[2 * i + 1] - nodes_m[2 * j + 1]);
+            distance_m[i * k + j] = dz_m == 0.0 ? d : hypot(d, dz_m);
+        }
+}
+
+/* ------------------------------------------------------------------ the channel's rules */
+/* Bit error rate in AWGN at Eb/N0 (linear), Proakis, Digital Communications (5th ed.):
+ * coherent BPSK 0.5 erfc(sqrt(Eb/N0)) (eq. 4.3-13); non-coherent binary FSK
+ * 0.5 exp(-Eb/(2 N0)) (eq. 4.5-45). */
+static double bit_error_rate(int64_t modulation, double ebn0)
+{
+    return modulation == IOUT_BFSK ? 0.5 * exp(-0.5 * ebn0) : 0.5 * erfc(sqrt(ebn0));
+}
+
+/* PER = 1 - (1 - BER)^bits, every bit of a packet needed (no coding), at a linear SINR. */
+static double packet_error_rate(const Channel *ch, double sinr)
+{
+    double ber = bit_error_rate(ch->modulation, sinr * ch->ebn0_per_snr);
+    return -expm1(ch->packet_bits * log1p(-ber));
+}
+
+int64_t iout_packet_error_rates(const Channel *ch, const double *sinr, int64_t count, double *per)
+{
+    if (count < 0)
+        return iout_fail("iout_packet_error_rates: count %lld < 0", (long long)count);
+    for (int64_t i = 0; i < count; i++)
+        per[i] = packet_error_rate(ch, sinr[i]);
+    return IOUT_OK;
+}
+
+/* A Binomial(n, p) count by inversion of one uniform u in [0, 1): the CDF summed from the
+ * rarer outcome's zero (its pmf (1 - q)^n, q <= 1/2, stays normal for n <= 1000). */
+static int64_t binomial(int64_t n, double p, double u)
+{
+    if (n <= 0 || p <= 0.0)
+        return 0;
+    if (p >= 1.0)
+        return n;
+    bool flip = p > 0.5;
+    double q = flip ? 1.0 - p : p, ratio = q / (1.0 - q);
+    double pmf = exp((double)n * log1p(-q)), cdf = pmf;
+    int64_t x = 0;
+    while (u >= cdf && x < n) {
+        pmf *= ratio * (double)(n - x) / (double)(x + 1);
+        cdf += pmf;
+        x++;
+    }
+    return flip ? n - x : x;
+}
+
+/* Two standard normals from two uniforms in [0, 1) (Box-Muller). */
+static void normals(const double *u, double *z1, double *z2)
+{
+    double r = sqrt(-2.0 * log1p(-u[0])), a = 2.0 * M_PI * u[1];
+    *z1 = r * cos(a);
+    *z2 = r * sin(a);
+}
+
+/* The power gain of a link in a slot from its 4 uniforms: Rician small-scale fading with
+ * K = rician_k (0: Rayleigh), |h|^2 with h = sqrt(K/(K+1)) + sqrt(1/(2(K+1))) (z1 + i z2),
+ * mean 1 (Rice 1944; Stojanovic & Preisig 2009 for the acoustic channel), times log-normal
+ * shadowing 10^(sigma z3 / 10) (median 1). 1 with fading off. */
+static double link_gain(const Channel *ch, const double *u)
+{
+    if (!ch->fading)
+        return 1.0;
+    double z1, z2, z3, z4;
+    normals(u, &z1, &z2);
+    normals(u + 2, &z3, &z4);
+    double los = sqrt(ch->rician_k / (ch->rician_k + 1.0));
+    double scatter = sqrt(0.5 / (ch->rician_k + 1.0));
+    double re = los + scatter * z1, im = scatter * z2;
+    return (re * re + im * im) * pow(10.0, ch->shadowing_sigma_db * z3 / 10.0);
+}
+
+/* Env e's uplinks through the channel (world/network.py states the rules). From the
+ * requests (`request_j`, and `reference`: the nearest active AUV naming each node, whose
+ * range sets its power; -1: none), which nodes can afford to transmit in the window the
+ * handshake leaves (`paid_j`: what each pays), their SINR at the AUVs, the packets that
+ * arrive, `delivered` and the delivered bits. Scales `uplink_req_j` to the window. */
+static void serve_channel(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
+                          const Channel *ch, const int64_t *data, int64_t node_stride,
+                          const bool *active, const double *distance_m, const double *request_j,
+                          const int64_t *reference, double *uplink_req_j, double *paid_j,
+                          bool *delivered, const LinkOutcomes *out)
+{
+    const double *energy = net->energy_j + e * k;
+    double *bits = net->node_bits + e * k;
+    int64_t row = IOUT_CHANNEL_DRAWS(n), sent[k], received[k];
+    double usable_s[k], success[k]; /* success: 1 - prod of the receiving AUVs' PER */
+    for (int64_t j = 0; j < k; j++) {
+        paid_j[j] = 0.0;
+        sent[j] = received[j] = 0;
+        success[j] = 0.0;
+        if (reference[j] < 0)
+            continue;
+        usable_s[j] = fmax(ch->data_s - ch->delay_s_per_m * distance_m[reference[j] * k + j], 0.0);
+        double cost_j = request_j[j] * usable_s[j] / ch->data_s;
+        if (usable_s[j] > 0.0 && energy[j] >= cost_j) {
+            paid_j[j] = cost_j;
+            sent[j] = (int64_t)floor(ch->data_rate_bps * usable_s[j] / ch->packet_bits);
+        }
+    }
+    for (int64_t i = 0; i < n; i++) {
+        int64_t j = data[i * node_stride];
+        double window_s = fmax(ch->data_s - ch->delay_s_per_m * distance_m[i * k + j], 0.0);
+        uplink_req_j[i] *= window_s / ch->data_s;
+        out->sinr_db[i] = out->per[i] = NAN;
+        if (!active[i] || paid_j[j] == 0.0)
+            continue;
+        /* Received power over the band's noise: a node's power makes SNR = snr_req at its
+         * reference AUV, so at range d it is snr_req E_req(d_ref) / E_req(d), times the
+         * link's gain (fading, shadowing). Other transmitting nodes add to the noise. */
+        const double *u = out->draws + i * row + 1;
+        double signal = 0.0, noise = 1.0;
+        for (int64_t m = 0; m < k; m++) {
+            if (paid_j[m] == 0.0 || (m != j && !ch->interference))
+                continue;
+            double harvest, need;
+            iout_link_energy(link, distance_m[i * k + m], &harvest, &need);
+            double power = ch->snr_req * request_j[m] / need * link_gain(ch, u + 4 * reference[m]);
+            if (m == j)
+                signal = power;
+            else
+                noise += power;
+        }
+        double sinr = signal / noise;
+        out->sinr_db[i] = 10.0 * log10(sinr);
+        out->per[i] = ch->packets ? packet_error_rate(ch, sinr) : (double)(sinr < ch->snr_req);
+        success[j] = 1.0 - (1.0 - success[j]) * out->per[i];
+    }
+    for (int64_t j = 0; j < k; j++) {
+        if (paid_j[j] == 0.0) {
+            delivered[j] = false;
+        } else if (ch->packets) {
+            received[j] = binomial(sent[j], success[j], out->draws[reference[j] * row]);
+            delivered[j] = (double)received[j] >= fmax(1.0, ceil(ch->delivery_share * (double)sent[j]));
+            bits[j] += (double)received[j] * ch->packet_bits;
+        } else { /* the Shannon bound: delivered when some AUV's SINR reaches snr_req */
+            delivered[j] = success[j] > 0.0;
+            bits[j] += delivered[j] ? ch->data_rate_bps * usable_s[j] : 0.0;
+        }
+    }
+    for (int64_t i = 0; i < n; i++) {
+        int64_t j = data[i * node_stride];
+        bool linked = active[i] && paid_j[j] > 0.0;
+        out->sent[i] = linked ? sent[j] : 0;
+        out->received[i] = linked ? received[j] : 0;
+    }
 }
 
 /* One slot of env e's nodes; the node indices must lie in [0, k) (checked by the callers). */
 void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
-                    int64_t k_reset, double aoi_max, const double *auv_xy, const int64_t *wet,
-                    const int64_t *data, int64_t node_stride, const bool *active,
-                    double *distance_m, bool *uplink_ok, double *uplink_req_j,
-                    double *uplink_stored_j, double *harvested_j, bool *delivered)
+                    const Channel *ch, int64_t k_reset, double aoi_max, const double *auv_xy,
+                    const int64_t *wet, const int64_t *data, int64_t node_stride,
+                    const bool *active, double *distance_m, bool *uplink_ok,
+                    double *uplink_req_j, double *uplink_stored_j, double *harvested_j,
+                    bool *delivered, const LinkOutcomes *out)
 {
     const double *nodes = net->nodes_m + e * k * 2;
     double *energy = net->energy_j + e * k, *aoi = net->aoi + e * k;
+    double *bits = net->node_bits + e * k;
     int64_t *count = net->service_count + e * k, *deliveries = net->deliveries + e * k;
-    double request_j[k]; /* the cheapest E_req of the active AUVs naming each node */
+    double request_j[k], paid_j[k]; /* the cheapest E_req of the active AUVs naming each node */
+    int64_t reference[k];           /* the AUV of that E_req (-1: no active AUV named it) */
     for (int64_t j = 0; j < k; j++) {
-        request_j[j] = INFINITY; /* no active AUV named the node */
+        request_j[j] = INFINITY;
+        reference[j] = -1;
         harvested_j[j] = 0.0;
     }
-    iout_distances(auv_xy, n, nodes, k, distance_m);
+    iout_distances(auv_xy, n, nodes, k, ch->dz_m, distance_m);
     for (int64_t i = 0; i < n; i++) {
         int64_t up = data[i * node_stride], charge = wet[i * node_stride];
         for (int64_t j = 0; j < k; j++) {
@@ -89,16 +241,27 @@ void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const L
             if (j == up) {
                 uplink_req_j[i] = need;
                 uplink_stored_j[i] = energy[j];
-                if (active[i] && need < request_j[j])
+                if (active[i] && need < request_j[j]) {
                     request_j[j] = need;
+                    reference[j] = i;
+                }
             }
             if (j == charge && active[i])
                 harvested_j[j] += harvest;
         }
     }
+    if (ch->enabled) {
+        serve_channel(net, e, n, k, link, ch, data, node_stride, active, distance_m, request_j,
+                      reference, uplink_req_j, paid_j, delivered, out);
+    } else { /* the paper's: delivered when the energy stored at the start covers E_req */
+        for (int64_t j = 0; j < k; j++) {
+            delivered[j] = energy[j] >= request_j[j];
+            paid_j[j] = delivered[j] ? request_j[j] : 0.0;
+            bits[j] += delivered[j] ? link->bits_per_delivery : 0.0;
+        }
+    }
     for (int64_t j = 0; j < k; j++) {
-        delivered[j] = energy[j] >= request_j[j]; /* energy stored at the start of the slot */
-        energy[j] += harvested_j[j] - (delivered[j] ? request_j[j] : 0.0);
+        energy[j] += harvested_j[j] - paid_j[j];
         deliveries[j] += delivered[j];
         count[j] += delivered[j];
         if (count[j] >= k_reset) {
@@ -114,7 +277,25 @@ void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const L
     net->jain[e] = iout_jain(deliveries, k);
 }
 
-/* The network rules of one slot on their own (for their tests), checked. */
+static int64_t check_serve(const char *where, int64_t e, int64_t n_envs, int64_t n, int64_t k,
+                           const int64_t *wet, const int64_t *data, int64_t node_stride)
+{
+    if (e < 0 || e >= n_envs || n < 1 || n > IOUT_MAX_AUVS || k < 1 || k > IOUT_MAX_NODES ||
+        node_stride < 1)
+        return iout_fail("%s: env %lld of %lld, %lld AUVs, %lld nodes, stride %lld; accepted an "
+                         "env in [0, envs), 1 to %d AUVs, 1 to %d nodes and a stride >= 1",
+                         where, (long long)e, (long long)n_envs, (long long)n, (long long)k,
+                         (long long)node_stride, IOUT_MAX_AUVS, IOUT_MAX_NODES);
+    for (int64_t i = 0; i < n; i++) {
+        int64_t w = wet[i * node_stride], d = data[i * node_stride];
+        if (w < 0 || w >= k || d < 0 || d >= k)
+            return iout_fail("%s: AUV %lld names nodes %lld and %lld; accepted 0 to %lld", where,
+                             (long long)i, (long long)w, (long long)d, (long long)(k - 1));
+    }
+    return IOUT_OK;
+}
+
+/* The network rules of one slot on their own, on the paper's channel (for their tests). */
 int64_t iout_serve(const Network *net, int64_t e, int64_t n_envs, int64_t n, int64_t k,
                    const Link *link, int64_t k_reset, double aoi_max, const double *auv_xy,
                    const int64_t *wet, const int64_t *data, int64_t node_stride,
@@ -122,19 +303,34 @@ int64_t iout_serve(const Network *net, int64_t e, int64_t n_envs, int64_t n, int
                    double *uplink_req_j, double *uplink_stored_j, double *harvested_j,
                    bool *delivered)
 {
-    if (e < 0 || e >= n_envs || n < 1 || n > IOUT_MAX_AUVS || k < 1 || k > IOUT_MAX_NODES ||
-        node_stride < 1)
-        return iout_fail("iout_serve: env %lld of %lld, %lld AUVs, %lld nodes, stride %lld; "
-                         "accepted an env in [0, envs), 1 to %d AUVs, 1 to %d nodes and a stride >= 1",
-                         (long long)e, (long long)n_envs, (long long)n, (long long)k,
-                         (long long)node_stride, IOUT_MAX_AUVS, IOUT_MAX_NODES);
-    for (int64_t i = 0; i < n; i++) {
-        int64_t w = wet[i * node_stride], d = data[i * node_stride];
-        if (w < 0 || w >= k || d < 0 || d >= k)
-            return iout_fail("iout_serve: AUV %lld names nodes %lld and %lld; accepted 0 to %lld",
-                             (long long)i, (long long)w, (long long)d, (long long)(k - 1));
-    }
-    iout_serve_env(net, e, n, k, link, k_reset, aoi_max, auv_xy, wet, data, node_stride, active,
-                   distance_m, uplink_ok, uplink_req_j, uplink_stored_j, harvested_j, delivered);
+    static const Channel paper = {.enabled = 0};
+    static const LinkOutcomes none = {0};
+    int64_t status = check_serve("iout_serve", e, n_envs, n, k, wet, data, node_stride);
+    if (status)
+        return status;
+    iout_serve_env(net, e, n, k, link, &paper, k_reset, aoi_max, auv_xy, wet, data, node_stride,
+                   active, distance_m, uplink_ok, uplink_req_j, uplink_stored_j, harvested_j,
+                   delivered, &none);
+    return IOUT_OK;
+}
+
+/* The same through a channel, with the per-AUV link outcomes (for their tests). Every AUV
+ * names node `wet[i]` to charge and `data[i]` to collect from; `draws` is (n,
+ * IOUT_CHANNEL_DRAWS(n)). */
+int64_t iout_serve_channel(const Network *net, int64_t e, int64_t n_envs, int64_t n, int64_t k,
+                           const Link *link, const Channel *ch, int64_t k_reset, double aoi_max,
+                           const double *auv_xy, const int64_t *wet, const int64_t *data,
+                           const bool *active, const double *draws, double *distance_m,
+                           bool *uplink_ok, double *sinr_db, double *per, int64_t *sent,
+                           int64_t *received)
+{
+    int64_t status = check_serve("iout_serve_channel", e, n_envs, n, k, wet, data, 1);
+    if (status)
+        return status;
+    double req_j[n], stored_j[n], harvested_j[k];
+    bool delivered[k];
+    LinkOutcomes out = {draws, sinr_db, per, sent, received};
+    iout_serve_env(net, e, n, k, link, ch, k_reset, aoi_max, auv_xy, wet, data, 1, active,
+                   distance_m, uplink_ok, req_j, stored_j, harvested_j, delivered, &out);
     return IOUT_OK;
 }
