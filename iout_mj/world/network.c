@@ -157,7 +157,7 @@ static void serve_channel(const Network *net, int64_t e, int64_t n, int64_t k, c
         if (reference[j] < 0)
             continue;
         usable_s[j] = fmax(ch->data_s - ch->delay_s_per_m * distance_m[reference[j] * k + j], 0.0);
-        double cost_j = request_j[j] * usable_s[j] / ch->data_s;
+        double cost_j = request_j[j] * (usable_s[j] / ch->data_s);
         if (usable_s[j] > 0.0 && energy[j] >= cost_j) {
             paid_j[j] = cost_j;
             sent[j] = (int64_t)floor(ch->data_rate_bps * usable_s[j] / ch->packet_bits);
@@ -180,7 +180,7 @@ static void serve_channel(const Network *net, int64_t e, int64_t n, int64_t k, c
                 continue;
             double harvest, need;
             iout_link_energy(link, distance_m[i * k + m], &harvest, &need);
-            double power = ch->snr_req * request_j[m] / need * link_gain(ch, u + 4 * reference[m]);
+            double power = ch->snr_req * (request_j[m] / need) * link_gain(ch, u + 4 * reference[m]);
             if (m == j)
                 signal = power;
             else
