@@ -9,6 +9,7 @@ from typing import NamedTuple
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import ROOT
 
 from iout_mj import native
 from iout_mj.config import AcousticsConfig, ChannelConfig, Config, NetworkConfig
@@ -248,3 +249,14 @@ def test_a_saved_batch_resumes_the_channel_exactly():
 def test_bad_channel_configs_say_what_is_accepted(data, message):
     with pytest.raises(ConfigError, match=message):
         Config.from_dict(data)
+
+
+def test_the_shipped_realistic_channel_turns_every_feature_on():
+    cfg = Config.load(ROOT / "training" / "configs" / "env" / "realistic-channel.yaml")
+    assert set(cfg.channel.features) == set(ALL)
+    assert cfg.acoustics == AcousticsConfig() and cfg.scenario == Config().scenario
+    steps = run(cfg, seed=3, slots=55)
+    assert {"sinr_db", "per", "packets_sent", "packets_received"} == set(steps[0][1])
+    sent = sum(sum(info["packets_sent"]) for _, info in steps)
+    received = sum(sum(info["packets_received"]) for _, info in steps)
+    assert 0 < received <= sent
