@@ -71,7 +71,7 @@ def trace(cfg: Config, log: MissionLog, net: SensorNetwork, slot: int) -> dict[s
         "headings_rad": log.headings_rad[: slot + 1].tolist(),
         "speeds_mps": log.speeds_mps[: slot + 1].tolist(),
         "nodes_m": net.nodes_m.tolist(),
-        "delivered_bits_per_node": (net.deliveries * net.bits_per_delivery).tolist(),
+        "delivered_bits_per_node": net.node_bits.tolist(),
         "dock_center_m": list(sc.dock_center_m),
         "dock_radius_m": sc.dock_radius_m,
         "area_m": list(sc.area_m),
