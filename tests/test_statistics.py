@@ -74,6 +74,9 @@ def test_seed_variants_resolve_like_the_policy(tmp_path):
     assert seed_variant("ppo-general", 3, 2) == "ppo-general-n2-seed3"
     assert seed_variant("ppo-n1-k7", 2, 1) == "ppo-n1-k7-seed2"
     assert seed_variant("runs/gen/", 1, 1) == "runs/gen-seed1"
+    # a run folder named for seed 0 (train --seed 0): its seed is replaced
+    assert seed_variant("runs/gen-seed0/best", 2, 2) == "runs/gen-seed2/best"
+    assert seed_variant("runs/gen-seed0", 1, 2) == "runs/gen-seed1"
     shutil.copytree(SHIPPED_DIR / "ppo-n1-k7", tmp_path / "gen")
     manifest = str(tmp_path / "gen" / "policy.json")
     assert seed_variant(manifest, 4, 1) == str(tmp_path / "gen-seed4" / "policy.json")

@@ -173,13 +173,20 @@ def seed_variant(name: str, training_seed: int, n_auvs: int) -> str:
     """The policy that is training seed `training_seed` of the learned policy `name` in an env
     of `n_auvs` AUVs: `name` itself for seed 0, else `name-seed<k>` resolved like `name`
     (`ppo-general` -> `ppo-general-n<N>-seed<k>`, `runs/gen` -> `runs/gen-seed<k>`, a policy
-    file `runs/gen/policy.json` -> `runs/gen-seed<k>/policy.json`)."""
+    file `runs/gen/policy.json` -> `runs/gen-seed<k>/policy.json`; a path through a run folder
+    named for seed 0, as `train --seed 0` names it, has that folder's seed replaced:
+    `runs/gen-seed0/best` -> `runs/gen-seed<k>/best`)."""
     if training_seed == 0:
         return name
     suffix = f"-seed{training_seed}"
     if name == GENERAL:
         return f"{GENERAL}-n{n_auvs}{suffix}"
     path = Path(name)
+    seed0 = [i for i, part in enumerate(path.parts) if part.endswith("-seed0")]
+    if seed0:
+        i = seed0[-1]
+        parts = path.parts
+        return str(Path(*parts[:i], parts[i].removesuffix("-seed0") + suffix, *parts[i + 1 :]))
     if path.name in (MANIFEST, *LEGACY_FILES) and path.is_file():
         return str(path.parent.with_name(path.parent.name + suffix) / path.name)
     return str(path) + suffix
