@@ -81,6 +81,9 @@ def shortened(argv: list[str]) -> list[str]:
             a[_option(a, "--steps") + 1] = "128"
         else:
             a += ["--steps", "128"]
+        n_auvs = re.search(r"-n(\d)\b", name)  # the smoke run flies the README config's N
+        if n_auvs and "--n-auvs" not in a:
+            a += ["--n-auvs", n_auvs.group(1)]
     if command == "bench":
         if "--warp" in a:
             pytest.importorskip("mujoco_warp")
@@ -104,7 +107,7 @@ def test_shortening_keeps_the_command_and_its_options():
     assert train == [
         "train",
         smoke,
-        *shlex.split("--seed 1 --out runs/ppo-general-n2-seed1 --steps 128"),
+        *shlex.split("--seed 1 --out runs/ppo-general-n2-seed1 --steps 128 --n-auvs 2"),
     ]
 
 
