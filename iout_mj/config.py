@@ -23,6 +23,7 @@ from iout_mj.schema import (
     check_finite,
     in_range,
     load_mapping,
+    one_of,
     require,
     to_plain,
 )
@@ -255,20 +256,10 @@ class ChannelConfig:
         in_range(self, "temperature_degc", 2.0, 30.0, MACKENZIE_RANGE)
         in_range(self, "salinity_ppt", 25.0, 40.0, MACKENZIE_RANGE)
         in_range(self, "handshake_legs", 0, 10)
-        require(
-            self.modulation in MODULATIONS,
-            "modulation",
-            self.modulation,
-            "one of " + ", ".join(repr(m) for m in MODULATIONS),
-        )
+        one_of(self, "modulation", MODULATIONS)
         in_range(self, "packet_bits", 8, 10**7)
         in_range(self, "delivery_share", 0.0, 1.0)
-        require(
-            self.fading_model in FADING_MODELS,
-            "fading_model",
-            self.fading_model,
-            "one of " + ", ".join(repr(m) for m in FADING_MODELS),
-        )
+        one_of(self, "fading_model", FADING_MODELS)
         in_range(self, "rician_k_db", -20.0, 40.0, "Rayleigh-like to nearly line of sight")
         in_range(self, "shadowing_sigma_db", 0.0, 20.0)
 
@@ -385,12 +376,7 @@ class PhysicsConfig:
 
     def __post_init__(self) -> None:
         check_finite(self)
-        require(
-            self.vehicle in vehicles.VEHICLES,
-            "vehicle",
-            self.vehicle,
-            "one of " + ", ".join(repr(v) for v in sorted(vehicles.VEHICLES)),
-        )
+        one_of(self, "vehicle", sorted(vehicles.VEHICLES))
         in_range(
             self,
             "timestep_s",

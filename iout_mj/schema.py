@@ -58,6 +58,12 @@ def require(ok: bool, name: str, value: Any, accepted: str) -> None:
         raise ConfigError(f"{name}={shown(value)} is invalid: accepted {accepted}")
 
 
+def one_of(obj: Any, name: str, accepted: Any) -> None:
+    """`obj.name` is one of `accepted` (named in the message, quoted)."""
+    value = getattr(obj, name)
+    require(value in accepted, name, value, "one of " + ", ".join(repr(a) for a in accepted))
+
+
 def check_finite(obj: Any) -> None:
     """Every number of a dataclass (in tuples too) is finite: NaN and inf are never settings.
     (Called first by every config's checks: the checks that follow note what they accept
