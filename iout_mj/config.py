@@ -189,6 +189,9 @@ CHANNEL_FEATURES = ("depth", "propagation", "packets", "interference", "fading")
 MODULATIONS = ("bpsk", "bfsk")
 """The uplink's modulations with a closed-form BER in AWGN (`acoustics.bit_error_rate`)."""
 FADING_MODELS = ("rayleigh", "rician")
+ABSORPTION_MODELS = ("thorp", "francois-garrison")
+"""Absorption of sound in sea water (`ChannelConfig.absorption`)."""
+FRANCOIS_GARRISON_RANGE = "Francois and Garrison (1982)'s range of validity"
 MAX_PACKETS_PER_SLOT = 1000
 """Packets of one data period: the compiled binomial draw sums (1 - p)^n, which stays above
 float64's smallest normal (2e-308) for n up to 1000 at p <= 1/2."""
@@ -235,6 +238,13 @@ class ChannelConfig:
     """Rician K factor (direct over scattered power) of 'rician' fading."""
     shadowing_sigma_db: float = 0.0
     """Standard deviation of the log-normal shadowing of the 'fading' feature (0: none)."""
+    absorption: str = "thorp"
+    """Absorption of sound in the link budget (AET and uplink): 'thorp' (the paper's eq. 3,
+    frequency only) or 'francois-garrison' (Francois and Garrison 1982, J. Acoust. Soc. Am.
+    72(6):1879: boric acid, magnesium sulphate and pure water at temperature_degc,
+    salinity_ppt, ph and the mean depth). Applies whatever `features` are on."""
+    ph: float = 8.0
+    """Sea water pH for 'francois-garrison' absorption (its boric acid term)."""
 
     def __post_init__(self) -> None:
         check_finite(self)
@@ -262,6 +272,19 @@ class ChannelConfig:
         one_of(self, "fading_model", FADING_MODELS)
         in_range(self, "rician_k_db", -20.0, 40.0, "Rayleigh-like to nearly line of sight")
         in_range(self, "shadowing_sigma_db", 0.0, 20.0)
+        one_of(self, "absorption", ABSORPTION_MODELS)
+        in_range(self, "ph", 7.7, 8.3, FRANCOIS_GARRISON_RANGE)
+        if self.absorption == "francois-garrison":
+            in_range(self, "temperature_degc", -2.0, 22.0, FRANCOIS_GARRISON_RANGE)
+            in_range(self, "salinity_ppt", 30.0, 35.0, FRANCOIS_GARRISON_RANGE)
+            for name in ("node_depth_m", "auv_depth_m"):
+                in_range(self, name, 0.0, 3500.0, FRANCOIS_GARRISON_RANGE)
+
+    @property
+    def mean_depth_m(self) -> float:
+        """The water column's one depth for sound speed and absorption: the mean of the AUV
+        and node depths."""
+        return 0.5 * (self.auv_depth_m + self.node_depth_m)
 
     def on(self, feature: str) -> bool:
         """Whether `feature` (one of CHANNEL_FEATURES) is turned on."""

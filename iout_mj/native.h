@@ -229,6 +229,9 @@ IOUT_API int64_t iout_serve_channel(const Network *net, int64_t e, int64_t n_env
                                     const double *draws, double *distance_m, bool *uplink_ok,
                                     double *sinr_db, double *per, int64_t *sent,
                                     int64_t *received);
+IOUT_API int64_t iout_francois_garrison(const double *f_khz, int64_t count,
+                                        double temperature_degc, double salinity_ppt,
+                                        double depth_m, double ph, double *alpha_db_per_km);
 IOUT_API int64_t iout_packet_error_rates(const Channel *ch, const double *sinr, int64_t count,
                                          double *per);
 void iout_link_energy(const Link *link, double distance_m, double *harvest_j, double *uplink_j);

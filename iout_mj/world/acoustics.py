@@ -2,7 +2,8 @@
 
 The combination implemented (DESIGN.md section 4; the paper's symbols):
 
-- alpha(f) [dB/km], f in kHz: Thorp (paper eq. 3).
+- alpha(f) [dB/km], f in kHz: Thorp (paper eq. 3), or Francois and Garrison (1982) with a
+  channel's `absorption` (`absorption_db_per_km`).
 - TL(d) = k_s * 10 log10(max(d, 1 m)) + alpha(f) * d / 1000.
 - SL = 170.8 + 10 log10(P_elec) + 10 log10(eta_tx) + DI_tx.
 - AET: RL = SL - TL + DI_rx and P_harv = eta_harv * n_hyd * 10^((RL + RVS)/10) / (4 R_p).
@@ -41,12 +42,63 @@ def thorp_absorption_db_per_km(f_khz: ArrayLike) -> FloatArray:
     return 0.11 * f2 / (1 + f2) + 44 * f2 / (4100 + f2) + 2.75e-4 * f2 + 0.003
 
 
-def transmission_loss_db(
-    distance_m: ArrayLike, f_khz: float, spreading_factor: float
+def francois_garrison_absorption_db_per_km(
+    f_khz: ArrayLike,
+    temperature_degc: float,
+    salinity_ppt: float,
+    depth_m: float,
+    ph: float = 8.0,
 ) -> FloatArray:
-    """TL = k_s * 10 log10(d) + alpha(f) d/1000, with d in metres (at least 1 m)."""
+    """Francois and Garrison (1982)'s absorption coefficient in dB/km for f in kHz (J. Acoust.
+    Soc. Am. 72(6):1879-1890, eqs. 2-4), by the compiled `iout_francois_garrison`:
+
+    alpha = A1 P1 f1 f^2 / (f1^2 + f^2)     boric acid, A1 = 8.86 / c 10^(0.78 pH - 5),
+                                            f1 = 2.8 sqrt(S / 35) 10^(4 - 1245 / theta)
+          + A2 P2 f2 f^2 / (f2^2 + f^2)     MgSO4, A2 = 21.44 S / c (1 + 0.025 T),
+                                            P2 = 1 - 1.37e-4 z + 6.2e-9 z^2,
+                                            f2 = 8.17 10^(8 - 1990 / theta) / (1 + 0.0018 (S - 35))
+          + A3 P3 f^2                       pure water, A3 a cubic in T (two branches at
+                                            20 C), P3 = 1 - 3.83e-5 z + 4.9e-10 z^2
+
+    with c = 1412 + 3.21 T + 1.19 S + 0.0167 z and theta = 273 + T (T in C, S in ppt, z in m).
+    """
+    shape = np.shape(f_khz)
+    f = np.ascontiguousarray(np.reshape(np.asarray(f_khz, dtype=float), -1))
+    alpha = np.empty_like(f)
+    native.call(
+        native.lib.iout_francois_garrison,
+        native.address(f),
+        f.size,
+        float(temperature_degc),
+        float(salinity_ppt),
+        float(depth_m),
+        float(ph),
+        native.address(alpha),
+    )
+    return alpha.reshape(shape)
+
+
+def absorption_db_per_km(f_khz: ArrayLike, channel: ChannelConfig | None = None) -> FloatArray:
+    """The absorption coefficient the link budget uses: Thorp's (no channel, or
+    `channel.absorption` 'thorp') or Francois and Garrison's at the channel's water (its
+    temperature, salinity, pH and mean depth)."""
+    if channel is None or channel.absorption == "thorp":
+        return thorp_absorption_db_per_km(f_khz)
+    return francois_garrison_absorption_db_per_km(
+        f_khz, channel.temperature_degc, channel.salinity_ppt, channel.mean_depth_m, channel.ph
+    )
+
+
+def transmission_loss_db(
+    distance_m: ArrayLike,
+    f_khz: float,
+    spreading_factor: float,
+    channel: ChannelConfig | None = None,
+) -> FloatArray:
+    """TL = k_s * 10 log10(d) + alpha(f) d/1000, with d in metres (at least 1 m) and alpha of
+    `absorption_db_per_km` (Thorp without a channel)."""
     d = np.maximum(np.asarray(distance_m, dtype=float), MIN_DISTANCE_M)
-    return spreading_factor * 10 * np.log10(d) + thorp_absorption_db_per_km(f_khz) * d / 1000
+    return spreading_factor * 10 * np.log10(d) + absorption_db_per_km(f_khz, channel) * d / 1000
 
 
 def source_level_db(p_elec_w: ArrayLike, eta: float, di_db: float) -> FloatArray:
@@ -74,10 +126,14 @@ def noise_psd_db(f_khz: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
     return 10 * np.log10(np.sum(10 ** (components / 10), axis=0))
 
 
-def harvest_power_w(distance_m: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
-    """Electrical power harvested by a node at `distance_m` from the AET projector."""
+def harvest_power_w(
+    distance_m: ArrayLike, cfg: AcousticsConfig, channel: ChannelConfig | None = None
+) -> FloatArray:
+    """Electrical power harvested by a node at `distance_m` from the AET projector (the
+    channel's absorption model; Thorp without one)."""
     sl = source_level_db(cfg.p_tx_w, cfg.eta_tx, cfg.di_tx_db)
-    rl = sl - transmission_loss_db(distance_m, cfg.f_wet_khz, cfg.spreading_factor) + cfg.di_rx_db
+    tl = transmission_loss_db(distance_m, cfg.f_wet_khz, cfg.spreading_factor, channel)
+    rl = sl - tl + cfg.di_rx_db
     return (
         cfg.eta_harv
         * cfg.n_hydrophones
@@ -91,22 +147,28 @@ def required_snr_db(cfg: AcousticsConfig) -> float:
     return float(10 * np.log10(2 ** (cfg.data_rate_bps / cfg.bandwidth_hz) - 1))
 
 
-def uplink_power_w(distance_m: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
+def uplink_power_w(
+    distance_m: ArrayLike, cfg: AcousticsConfig, channel: ChannelConfig | None = None
+) -> FloatArray:
     """Electrical transmit power a node needs to reach an AUV at `distance_m` at rate R."""
     nl_band = noise_psd_db(cfg.f_data_khz, cfg) + 10 * np.log10(cfg.bandwidth_hz)
-    tl = transmission_loss_db(distance_m, cfg.f_data_khz, cfg.spreading_factor)
+    tl = transmission_loss_db(distance_m, cfg.f_data_khz, cfg.spreading_factor, channel)
     sl_req = required_snr_db(cfg) + tl + nl_band
     return 10 ** ((sl_req - SL_REF_DB - 10 * np.log10(cfg.eta_tx) - cfg.di_tx_db) / 10)
 
 
-def harvest_energy_j(distance_m: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
+def harvest_energy_j(
+    distance_m: ArrayLike, cfg: AcousticsConfig, channel: ChannelConfig | None = None
+) -> FloatArray:
     """Energy harvested over one charging period tau_charging."""
-    return harvest_power_w(distance_m, cfg) * cfg.charging_s
+    return harvest_power_w(distance_m, cfg, channel) * cfg.charging_s
 
 
-def uplink_energy_j(distance_m: ArrayLike, cfg: AcousticsConfig) -> FloatArray:
+def uplink_energy_j(
+    distance_m: ArrayLike, cfg: AcousticsConfig, channel: ChannelConfig | None = None
+) -> FloatArray:
     """Energy E_req a node spends to deliver one update over tau_data."""
-    return uplink_power_w(distance_m, cfg) * cfg.data_s
+    return uplink_power_w(distance_m, cfg, channel) * cfg.data_s
 
 
 LINK_DTYPE = native.record_dtype("Link")
@@ -120,9 +182,11 @@ class LinkBudget(native.Frozen):
 
     harvest(d) = c_h d^-k_s 10^(-alpha_wet d / 10^4)
     uplink(d) = c_u d^k_s 10^(alpha_data d / 10^4)
+
+    with alpha of the channel's absorption model (Thorp without a channel).
     """
 
-    def __init__(self, cfg: AcousticsConfig):
+    def __init__(self, cfg: AcousticsConfig, channel: ChannelConfig | None = None):
         sl = source_level_db(cfg.p_tx_w, cfg.eta_tx, cfg.di_tx_db)
         c_harvest_j = (
             cfg.eta_harv
@@ -140,8 +204,8 @@ class LinkBudget(native.Frozen):
         values = {
             "harvest_j": c_harvest_j,
             "uplink_j": c_uplink_j,
-            "wet_per_m": -float(thorp_absorption_db_per_km(cfg.f_wet_khz)) * ln10 / 1e4,
-            "data_per_m": float(thorp_absorption_db_per_km(cfg.f_data_khz)) * ln10 / 1e4,
+            "wet_per_m": -float(absorption_db_per_km(cfg.f_wet_khz, channel)) * ln10 / 1e4,
+            "data_per_m": float(absorption_db_per_km(cfg.f_data_khz, channel)) * ln10 / 1e4,
             "spreading": cfg.spreading_factor,
             "min_distance_m": MIN_DISTANCE_M,
             "bits_per_delivery": bits_per_delivery(cfg),
@@ -204,8 +268,9 @@ def mackenzie_sound_speed_mps(
 def sound_speed_mps(cfg: ChannelConfig) -> float:
     """The channel's sound speed: Mackenzie's at the mean of the AUV and node depths (one
     value per config: the handshake's legs are short against the water column's structure)."""
-    depth_m = 0.5 * (cfg.auv_depth_m + cfg.node_depth_m)
-    return float(mackenzie_sound_speed_mps(cfg.temperature_degc, cfg.salinity_ppt, depth_m))
+    return float(
+        mackenzie_sound_speed_mps(cfg.temperature_degc, cfg.salinity_ppt, cfg.mean_depth_m)
+    )
 
 
 CHANNEL_DTYPE = native.record_dtype("Channel")

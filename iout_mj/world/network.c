@@ -65,6 +65,38 @@ void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int6
         }
 }
 
+/* Absorption of sound in sea water in dB/km at f_khz, Francois & Garrison (1982), "Sound
+ * absorption based on ocean measurements. Part II: Boric acid contribution and equation for
+ * total absorption", J. Acoust. Soc. Am. 72(6):1879-1890, eqs. 2-4: relaxations of boric acid
+ * (A1 P1 f1 f^2 / (f1^2 + f^2)) and magnesium sulphate (A2 P2 f2 f^2 / (f2^2 + f^2)) plus pure
+ * water's viscosity (A3 P3 f^2), at temperature t (deg C), salinity s (ppt), depth z (m) and
+ * pH, with their sound speed c = 1412 + 3.21 t + 1.19 s + 0.0167 z and theta = 273 + t. */
+static double francois_garrison(double f, double t, double s, double z, double ph)
+{
+    double c = 1412.0 + 3.21 * t + 1.19 * s + 0.0167 * z, theta = 273.0 + t, f2 = f * f;
+    double a1 = 8.86 / c * pow(10.0, 0.78 * ph - 5.0);
+    double f1 = 2.8 * sqrt(s / 35.0) * pow(10.0, 4.0 - 1245.0 / theta);
+    double a2 = 21.44 * s / c * (1.0 + 0.025 * t);
+    double p2 = 1.0 - 1.37e-4 * z + 6.2e-9 * z * z;
+    double fm = 8.17 * pow(10.0, 8.0 - 1990.0 / theta) / (1.0 + 0.0018 * (s - 35.0));
+    double a3 = t <= 20.0 ? 4.937e-4 - 2.59e-5 * t + 9.11e-7 * t * t - 1.5e-8 * t * t * t
+                          : 3.964e-4 - 1.146e-5 * t + 1.45e-7 * t * t - 6.5e-10 * t * t * t;
+    double p3 = 1.0 - 3.83e-5 * z + 4.9e-10 * z * z;
+    return a1 * f1 * f2 / (f1 * f1 + f2) + a2 * p2 * fm * f2 / (fm * fm + f2) + a3 * p3 * f2;
+}
+
+int64_t iout_francois_garrison(const double *f_khz, int64_t count, double temperature_degc,
+                               double salinity_ppt, double depth_m, double ph,
+                               double *alpha_db_per_km)
+{
+    if (count < 0)
+        return iout_fail("iout_francois_garrison: count %lld < 0", (long long)count);
+    for (int64_t i = 0; i < count; i++)
+        alpha_db_per_km[i] = francois_garrison(f_khz[i], temperature_degc, salinity_ppt,
+                                               depth_m, ph);
+    return IOUT_OK;
+}
+
 /* ------------------------------------------------------------------ the channel's rules */
 /* Bit error rate in AWGN at Eb/N0 (linear), Proakis, Digital Communications (5th ed.):
  * coherent BPSK 0.5 erfc(sqrt(Eb/N0)) (eq. 4.3-13); non-coherent binary FSK

@@ -106,8 +106,9 @@ class SensorNetwork(native.Frozen):
         self.cfg = network
         self.acoustic = acoustic
         self.bits_per_delivery = acoustics.bits_per_delivery(acoustic)
-        self.link = acoustics.LinkBudget(acoustic)
-        self.channel = acoustics.ChannelConstants(channel or ChannelConfig(), acoustic)
+        channel = channel or ChannelConfig()
+        self.link = acoustics.LinkBudget(acoustic, channel)
+        self.channel = acoustics.ChannelConstants(channel, acoustic)
         """The channel's constants (every feature off by default: the paper's channel)."""
         self.nodes_m = native.allocate((*batch, k, 2), float)
         """(*batch, K, 2) node positions (a random layout may differ per environment)."""
