@@ -141,6 +141,7 @@ class AUVPhysics(engine.Physics):
         v[self._vx] = speed_mps * np.cos(yaw_rad)
         v[self._vy] = speed_mps * np.sin(yaw_rad)
         v[self._vyaw] = 0.0
+        self.data.ptr.plugin_state[:] = 0.0  # the added mass's force record is of another pose
         self.set_commands(yaw_rad, speed_mps)
         self.meter.reset()
         self.substep_qpos = np.zeros((0, self.model.ptr.nq))

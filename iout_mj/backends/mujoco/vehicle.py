@@ -34,8 +34,10 @@ import mujoco
 import numpy as np
 
 from iout_mj import vehicles
-from iout_mj.backends.mujoco import names
+from iout_mj.backends.mujoco import added_mass, names
 from iout_mj.config import Config
+
+added_mass.load()  # the MJCF files name the plugin: MuJoCo must know it before reading them
 
 AUV_DEPTH_M = -10.0
 SEABED_DEPTH_M = -30.0
@@ -164,7 +166,9 @@ def build_scene(cfg: Config) -> mujoco.MjSpec:
     _add_markers(spec, cfg)
     for i in range(cfg.scenario.n_auvs):
         frame = spec.worldbody.add_frame(pos=[0.0, 0.0, AUV_DEPTH_M])
-        spec.attach(auv_spec(cfg), prefix=names.auv_prefix(i), frame=frame)
+        auv = auv_spec(cfg)
+        spec.attach(auv, prefix=names.auv_prefix(i), frame=frame)
+        added_mass.attach_instance(spec, auv, names.auv_prefix(i))
         # The area's edges are a fence: joint limits the vehicle stops against.
         for joint, side in (
             (names.JOINT_X, cfg.scenario.area_m[0]),
@@ -177,5 +181,15 @@ def build_scene(cfg: Config) -> mujoco.MjSpec:
 
 
 def build_model(cfg: Config) -> mujoco.MjModel:
-    """Compiled model of `build_scene(cfg)`; AUVs sit at the origin until the task places them."""
-    return build_scene(cfg).compile()
+    """Compiled model of `build_scene(cfg)`; AUVs sit at the origin until the task places them.
+    MuJoCo's own added mass of the hulls' fluid ellipsoids is off: the plugin applies theirs."""
+    model = build_scene(cfg).compile()
+    added_mass.disable_fluid_added_mass(
+        model,
+        [
+            model.geom(names.auv_prefix(i) + g).id
+            for i in range(cfg.scenario.n_auvs)
+            for g in (names.HULL_DRAG_GEOM, names.FIN_DRAG_GEOM)
+        ],
+    )
+    return model
