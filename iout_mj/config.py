@@ -211,10 +211,17 @@ class ChannelConfig:
     other's noise), 'fading' (small-scale fading and log-normal shadowing per link and slot);
     () is the paper's channel."""
     node_depth_m: float = 100.0
-    """Seabed depth of every node (a layout may give its own later). Default: the shallow
+    """Seabed depth of every node without its own (`node_depths_m`). Default: the shallow
     shelf of the paper's coastal IoUT setting (ours; the paper is two-dimensional)."""
     auv_depth_m: float = 50.0
-    """Operating depth of every AUV (ours: mid-water over the default seabed)."""
+    """Operating depth of every AUV without its own (`auv_depths_m`; ours: mid-water over the
+    default seabed)."""
+    node_depths_m: tuple[float, ...] = ()
+    """Seabed depth of each node, one per node of the layout (a nodes file's or nodes_m's z
+    column fills it); () gives every node node_depth_m."""
+    auv_depths_m: tuple[float, ...] = ()
+    """Operating depth of each AUV, AUV i at auv_depths_m[i] (at least n_auvs values); ()
+    gives every AUV auv_depth_m."""
     temperature_degc: float = 10.0
     """Water temperature for the sound speed (Mackenzie 1981): a temperate-shelf mean (ours)."""
     salinity_ppt: float = 35.0
@@ -257,11 +264,21 @@ class ChannelConfig:
         )
         for name in ("node_depth_m", "auv_depth_m"):
             in_range(self, name, 0.0, 8000.0, MACKENZIE_RANGE)
+        for name in ("node_depths_m", "auv_depths_m"):
+            depths = getattr(self, name)
+            require(
+                all(0.0 <= z <= 8000.0 for z in depths),
+                name,
+                depths,
+                "depths in [0, 8000] m below the surface (positive down; " + MACKENZIE_RANGE + ")",
+            )
+        seabed_m = min(self.node_depths_m or (self.node_depth_m,))
+        auv_m = max(self.auv_depths_m or (self.auv_depth_m,))
         require(
-            self.auv_depth_m <= self.node_depth_m,
-            "auv_depth_m",
-            self.auv_depth_m,
-            f"a depth at most node_depth_m={self.node_depth_m:g} (above the seabed)",
+            auv_m <= seabed_m,
+            "auv_depths_m" if self.auv_depths_m else "auv_depth_m",
+            self.auv_depths_m or self.auv_depth_m,
+            f"depths at most the shallowest node's seabed, {seabed_m:g} m (above the seabed)",
         )
         in_range(self, "temperature_degc", 2.0, 30.0, MACKENZIE_RANGE)
         in_range(self, "salinity_ppt", 25.0, 40.0, MACKENZIE_RANGE)
@@ -277,14 +294,28 @@ class ChannelConfig:
         if self.absorption == "francois-garrison":
             in_range(self, "temperature_degc", -2.0, 22.0, FRANCOIS_GARRISON_RANGE)
             in_range(self, "salinity_ppt", 30.0, 35.0, FRANCOIS_GARRISON_RANGE)
-            for name in ("node_depth_m", "auv_depth_m"):
-                in_range(self, name, 0.0, 3500.0, FRANCOIS_GARRISON_RANGE)
+            require(
+                self.mean_depth_m <= 3500.0,
+                "node_depth_m",
+                self.node_depths_m or self.node_depth_m,
+                f"depths whose mean_depth_m is at most 3500 m ({FRANCOIS_GARRISON_RANGE})",
+            )
 
     @property
     def mean_depth_m(self) -> float:
-        """The water column's one depth for sound speed and absorption: the mean of the AUV
-        and node depths."""
-        return 0.5 * (self.auv_depth_m + self.node_depth_m)
+        """The water column's one depth for sound speed and absorption: the mean of the AUVs'
+        mean depth and the nodes' mean depth."""
+        auv = self.auv_depths_m or (self.auv_depth_m,)
+        node = self.node_depths_m or (self.node_depth_m,)
+        return 0.5 * (sum(auv) / len(auv) + sum(node) / len(node))
+
+    def depths_m(self, n_auvs: int, n_nodes: int) -> tuple[list[float], list[float]]:
+        """The (N,) AUV and (K,) node depths the rules use: every one 0 with 'depth' off (the
+        paper's horizontal ranges)."""
+        if not self.on("depth"):
+            return [0.0] * n_auvs, [0.0] * n_nodes
+        auv = list(self.auv_depths_m[:n_auvs]) or [self.auv_depth_m] * n_auvs
+        return auv, list(self.node_depths_m) or [self.node_depth_m] * n_nodes
 
     def on(self, feature: str) -> bool:
         """Whether `feature` (one of CHANNEL_FEATURES) is turned on."""
@@ -572,8 +603,22 @@ class Config:
         )
 
     def _check_channel(self) -> None:
-        """The channel's bounds that involve the acoustics section."""
-        ch, ac = self.channel, self.acoustics
+        """The channel's bounds that involve the acoustics and scenario sections."""
+        ch, ac, sc = self.channel, self.acoustics, self.scenario
+        if ch.node_depths_m:
+            require(
+                len(ch.node_depths_m) == sc.n_nodes,
+                "channel.node_depths_m",
+                f"{len(ch.node_depths_m)} depths",
+                f"one depth per node of scenario.nodes_m ({sc.n_nodes}), or none",
+            )
+        if ch.auv_depths_m:
+            require(
+                len(ch.auv_depths_m) >= sc.n_auvs,
+                "channel.auv_depths_m",
+                f"{len(ch.auv_depths_m)} depths",
+                f"at least one depth per AUV (scenario.n_auvs={sc.n_auvs}), or none",
+            )
         if ch.on("packets"):
             packets = math.floor(ac.data_rate_bps * ac.data_s / ch.packet_bits)
             require(
@@ -630,9 +675,36 @@ class Config:
             motion = data.get("motion", {})
             if isinstance(motion, dict):
                 data = {**data, "motion": {**vehicles.get(name).motion, **motion}}
-        return build_dataclass(cls, data, "config")
+        return build_dataclass(cls, _node_depths_apart(data), "config")
 
     @classmethod
     def load(cls, path: str | Path) -> Config:
         """Read a YAML or JSON file written by `save` (or by hand; missing keys take defaults)."""
         return cls.from_dict(load_mapping(path, "config file"))
+
+
+def _node_depths_apart(data: Any) -> Any:
+    """Plain config data whose scenario.nodes_m rows carry a seabed depth (x, y, z) as the
+    same nodes (x, y) and channel.node_depths_m (z); other data as it is."""
+    scenario: Any = data.get("scenario") if isinstance(data, dict) else None
+    nodes = scenario.get("nodes_m") if isinstance(scenario, dict) else None
+    if not isinstance(nodes, list) or not any(
+        isinstance(row, (list, tuple)) and len(row) == 3 for row in nodes
+    ):
+        return data
+    channel = data.get("channel", {})
+    require(
+        all(isinstance(row, (list, tuple)) and len(row) == 3 for row in nodes)
+        and isinstance(channel, dict)
+        and "node_depths_m" not in channel,
+        "scenario.nodes_m",
+        nodes,
+        "every row (x, y) or every row (x, y, z) with z the seabed depth (then without "
+        "channel.node_depths_m)",
+    )
+    depths = {"node_depths_m": [row[2] for row in nodes]}
+    return {
+        **data,
+        "scenario": {**scenario, "nodes_m": [list(row[:2]) for row in nodes]},
+        "channel": {**channel, **depths} if isinstance(channel, dict) else depths,
+    }

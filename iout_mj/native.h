@@ -45,9 +45,9 @@
 
 /* Channel: the acoustic network layer's constants (world.acoustics.ChannelConstants); every
  * feature off (enabled 0) is the paper's channel. Flags are 0 or 1; fading is Rician with
- * K = rician_k (0: Rayleigh). */
+ * K = rician_k (0: Rayleigh). The depths are the Mission's auv_depth_m and node_depth_m. */
 #define IOUT_CHANNEL(X)                                                                         \
-    X(int64_t, enabled) X(double, dz_m) X(double, delay_s_per_m) X(double, data_s)              \
+    X(int64_t, enabled) X(double, delay_s_per_m) X(double, data_s)                              \
     X(double, data_rate_bps) X(int64_t, packets) X(double, packet_bits)                         \
     X(double, delivery_share) X(int64_t, modulation) X(double, ebn0_per_snr) X(double, snr_req) \
     X(int64_t, interference) X(int64_t, fading) X(double, rician_k)                             \
@@ -90,7 +90,9 @@ enum { IOUT_BPSK = 0, IOUT_BFSK = 1 };
 #define IOUT_MISSION_CONSTANTS(X)                                                               \
     X(const Params, p) X(const Link, link) X(const Channel, channel)                            \
     X(const double, dtheta_rad) /* (heading_levels,) */                                         \
-    X(const double, dv_mps)     /* (speed_levels,) */
+    X(const double, dv_mps)     /* (speed_levels,) */                                           \
+    X(const double, auv_depth_m)  /* (N,) below the surface; zeros with depth off */             \
+    X(const double, node_depth_m) /* (K,) of each node's seabed; zeros with depth off */
 #define IOUT_MISSION_STRUCTS(X) X(State, s) X(Network, net) X(Log, log)
 #define IOUT_MISSION_IO(X)                                                                      \
     X(int64_t, actions)           /* (B, N, 4) the slot's decoded actions */                    \
@@ -225,6 +227,7 @@ IOUT_API int64_t iout_serve(const Network *net, int64_t e, int64_t n_envs, int64
 IOUT_API int64_t iout_serve_channel(const Network *net, int64_t e, int64_t n_envs, int64_t n,
                                     int64_t k, const Link *link, const Channel *ch,
                                     int64_t k_reset, double aoi_max, const double *auv_xy,
+                                    const double *auv_depth_m, const double *node_depth_m,
                                     const int64_t *wet, const int64_t *data, const bool *active,
                                     const double *draws, double *distance_m, bool *uplink_ok,
                                     double *sinr_db, double *per, int64_t *sent,
@@ -236,10 +239,12 @@ IOUT_API int64_t iout_packet_error_rates(const Channel *ch, const double *sinr, 
                                          double *per);
 void iout_link_energy(const Link *link, double distance_m, double *harvest_j, double *uplink_j);
 double iout_jain(const int64_t *counts, int64_t k);
-void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int64_t k,
-                    double dz_m, double *distance_m);
+void iout_distances(const double *auv_xy, const double *auv_depth_m, int64_t n,
+                    const double *nodes_m, const double *node_depth_m, int64_t k,
+                    double *distance_m);
 void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
                     const Channel *ch, int64_t k_reset, double aoi_max, const double *auv_xy,
+                    const double *auv_depth_m, const double *node_depth_m,
                     const int64_t *wet, const int64_t *data, int64_t node_stride,
                     const bool *active, double *distance_m, bool *uplink_ok,
                     double *uplink_req_j, double *uplink_stored_j, double *harvested_j,

@@ -190,45 +190,69 @@ def _given(config: ConfigLike) -> tuple[Config, set[str]]:
 
 
 def read_nodes(nodes: NodesLike) -> tuple[Point, ...] | None:
-    """Node positions from a sequence or a CSV file (one `x, y` per row in metres; a header
-    row and `#` comments are allowed)."""
+    """Node positions (x, y) from a sequence or a CSV file (`read_layout`; a depth column is
+    read by `read_layout`)."""
+    layout = read_layout(nodes)
+    return None if layout is None else layout[0]
+
+
+def read_layout(nodes: NodesLike) -> tuple[tuple[Point, ...], tuple[float, ...]] | None:
+    """Node positions and seabed depths from a sequence or a CSV file: one `x, y` or
+    `x, y, z` per row in metres (z: the node's seabed depth, positive down; every row alike),
+    a header row and `#` comments allowed. The depths are () where no row gives one."""
     if nodes is None:
         return None
-    if isinstance(nodes, (str, Path)):
-        path = Path(nodes)
-        if not path.is_file():
-            raise ConfigError(f"nodes file {path} does not exist or is not a regular file")
-        if path.stat().st_size > MAX_NODES_FILE_BYTES:
-            raise ConfigError(f"nodes file {path} is larger than {MAX_NODES_FILE_BYTES} bytes")
-        rows: list[tuple[float, float]] = []
-        header = False
-        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
-            cells = [c.strip() for c in line.split("#")[0].split(",")]
-            if cells == [""]:
-                continue
-            try:
-                values = [float(c) for c in cells]
-            except ValueError:
-                if not rows and not header:
-                    header = True  # one header row, before the data
-                    continue
-                raise ConfigError(
-                    f"{path}:{number}: {line.strip()!r} is not a row of numbers; accepted "
-                    "'x, y' in metres per row"
-                ) from None
-            if len(values) != 2:
-                raise ConfigError(
-                    f"{path}:{number}: {len(values)} values; accepted 'x, y' in metres (node "
-                    "depth is not modelled yet)"
-                )
-            rows.append((values[0], values[1]))
-        nodes = rows
+    given: Any = _read_rows(Path(nodes)) if isinstance(nodes, (str, Path)) else nodes
+    accepted = "(x, y) or (x, y, z) in metres, z the seabed depth below the surface (>= 0)"
     try:
-        return tuple((float(x), float(y)) for x, y in nodes)
+        rows = [tuple(float(v) for v in row) for row in given]
     except (TypeError, ValueError):
+        raise ConfigError(f"nodes={nodes!r} is invalid: accepted a list of {accepted}") from None
+    widths = {len(row) for row in rows}
+    if not widths <= {2, 3} or len(widths) > 1:
         raise ConfigError(
-            f"nodes={nodes!r} is invalid: accepted a list of (x, y) in metres"
-        ) from None
+            f"nodes have rows of {sorted(widths)} values; accepted every row {accepted}"
+        )
+    points = tuple((row[0], row[1]) for row in rows)
+    depths = tuple(row[2] for row in rows if len(row) == 3)
+    above = [i for i, z in enumerate(depths) if z < 0.0]
+    if above:
+        raise ConfigError(
+            f"node {above[0]} has z={depths[above[0]]:g}, above the surface; accepted a seabed "
+            "depth z >= 0 m, positive down"
+        )
+    return points, depths
+
+
+def _read_rows(path: Path) -> list[list[float]]:
+    """The rows of numbers of a nodes CSV file (a header row and `#` comments skipped)."""
+    if not path.is_file():
+        raise ConfigError(f"nodes file {path} does not exist or is not a regular file")
+    if path.stat().st_size > MAX_NODES_FILE_BYTES:
+        raise ConfigError(f"nodes file {path} is larger than {MAX_NODES_FILE_BYTES} bytes")
+    rows: list[list[float]] = []
+    header = False
+    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        cells = [c.strip() for c in line.split("#")[0].split(",")]
+        if cells == [""]:
+            continue
+        try:
+            values = [float(c) for c in cells]
+        except ValueError:
+            if not rows and not header:
+                header = True  # one header row, before the data
+                continue
+            raise ConfigError(
+                f"{path}:{number}: {line.strip()!r} is not a row of numbers; accepted "
+                "'x, y' or 'x, y, z' in metres per row"
+            ) from None
+        if len(values) not in (2, 3) or (rows and len(values) != len(rows[0])):
+            raise ConfigError(
+                f"{path}:{number}: {len(values)} values; accepted 'x, y' or 'x, y, z' in "
+                "metres (z: the seabed depth, positive down), the same in every row"
+            )
+        rows.append(values)
+    return rows
 
 
 def resolve(
@@ -273,7 +297,7 @@ def resolve(
             )
         return dataclasses.replace(config, backend=backend)
     base, sets = _given(config)
-    own = read_nodes(nodes)
+    own, depths = read_layout(nodes) or (None, ())
     where = (
         (f"nodes file {nodes}" if isinstance(nodes, (str, Path)) else "nodes=")
         if own is not None
@@ -306,7 +330,9 @@ def resolve(
                 f"{len(own)} nodes: leave the layout out to fly them"
             )
         scenario = dataclasses.replace(base.scenario, n_auvs=n, nodes_m=own)
-        return EnvSpec(base.replace(scenario=scenario), "custom", backend)
+        own_depths = depths or base.channel.node_depths_m
+        channel = dataclasses.replace(base.channel, node_depths_m=own_depths)
+        return EnvSpec(base.replace(scenario=scenario, channel=channel), "custom", backend)
     k = base.scenario.n_nodes if n_nodes is None else n_nodes
     layout = layout or "paper"
     return EnvSpec(fixed_config(n, k, base), layout, backend)

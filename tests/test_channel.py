@@ -50,6 +50,7 @@ def serve(net: SensorNetwork, xy, data, draws=None, wet=None) -> Links:
         np.zeros((n, k)), np.zeros(n, bool), np.zeros(n), np.zeros(n), *np.zeros((2, n), np.int64)
     )
     ints = [np.ascontiguousarray(a, np.int64) for a in (wet or data, data)]
+    depths = [np.array(z, float) for z in net.channel_config.depths_m(n, k)]
     native.call(
         native.lib.iout_serve_channel,
         ctypes.addressof(net._struct),
@@ -62,6 +63,7 @@ def serve(net: SensorNetwork, xy, data, draws=None, wet=None) -> Links:
         net.cfg.k_reset,
         net.cfg.aoi_max,
         native.address(xy),
+        *(native.address(a) for a in depths),
         *(native.address(a) for a in ints),
         native.address(np.ones(n, bool)),
         native.address(draws),
@@ -243,7 +245,7 @@ def test_a_saved_batch_resumes_the_channel_exactly():
             {"channel": {"features": ["interference"]}, "acoustics": {"f_wet_khz": 50.2}},
             "outside the data band",
         ),
-        ({"channel": {"auv_depth_m": 200.0}}, "at most node_depth_m=100"),
+        ({"channel": {"auv_depth_m": 200.0}}, "at most the shallowest node's seabed, 100 m"),
     ],
 )
 def test_bad_channel_configs_say_what_is_accepted(data, message):

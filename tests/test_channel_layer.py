@@ -1,10 +1,12 @@
 """The acoustic network layer's second part: Francois-Garrison absorption, per-AUV and per-node
 depths, the link budget by range and depth, the mission trace, and the channel in every env."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
 from iout_mj.config import AcousticsConfig, ChannelConfig, Config
+from iout_mj.scenarios import resolve
 from iout_mj.schema import ConfigError
 from iout_mj.world import acoustics
 
@@ -67,3 +69,70 @@ def test_absorption_refusals():
         ChannelConfig(absorption=FG, temperature_degc=25.0)
     with pytest.raises(ConfigError, match=r"ph.*\[7\.7, 8\.3\]"):
         Config.from_dict({"channel": {"ph": 9.0}})
+
+
+# ------------------------------------------------------------------ depths
+def slant_env(cfg: Config):
+    env = gym.make("iout_mj/MultiAUV-v0", backend="kinematic", config=cfg).unwrapped
+    env.reset(seed=0)
+    m = env.mission
+    flat = np.hypot(*(m.state.positions_m[:, None, :] - m.network.nodes_m[None]).transpose(2, 0, 1))
+    return m, flat
+
+
+def test_per_auv_and_per_node_depths_make_each_range_slant():
+    nodes = [[100.0, 100.0, 80.0], [900.0, 100.0, 120.0], [500.0, 800.0, 100.0]]
+    data = {"scenario": {"nodes_m": nodes}, "channel": {"features": ["depth"]}}
+    cfg = Config.from_dict({**data, "channel": {"features": ["depth"], "auv_depths_m": [20, 60]}})
+    assert cfg.channel.node_depths_m == (80.0, 120.0, 100.0)
+    assert cfg.scenario.nodes_m == ((100.0, 100.0), (900.0, 100.0), (500.0, 800.0))
+    m, flat = slant_env(cfg)
+    dz = np.array([[60.0, 100.0, 80.0], [20.0, 60.0, 40.0]])  # node z - AUV z
+    np.testing.assert_allclose(m.state.distance_m, np.hypot(flat, dz), rtol=1e-12)
+    one = Config.from_dict({**data, "channel": {"features": ["depth"], "auv_depth_m": 30.0}})
+    m, flat = slant_env(one)
+    np.testing.assert_allclose(m.state.distance_m, np.hypot(flat, [50.0, 90.0, 70.0]))
+    off = Config.from_dict({"scenario": {"nodes_m": nodes}})  # z kept, depth off: horizontal
+    m, flat = slant_env(off)
+    assert np.array_equal(m.state.distance_m, flat)
+
+
+def test_a_nodes_file_with_depths(tmp_path):
+    path = tmp_path / "nodes.csv"
+    path.write_text("x, y, z  # z: seabed depth\n100, 100, 80\n900, 100, 120\n500, 800, 90\n")
+    spec = resolve(nodes=path)
+    assert spec.config.channel.node_depths_m == (80.0, 120.0, 90.0)
+    assert spec.config.scenario.nodes_m[2] == (500.0, 800.0)
+    flat = tmp_path / "flat.csv"
+    flat.write_text("100, 100\n900, 100\n")
+    assert resolve(nodes=flat).config.channel.node_depths_m == ()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("100, 100, -5\n900, 100, 50\n", "node 0 has z=-5, above the surface; accepted a seabed"),
+        ("100, 100, 50\n900, 100\n", r"2 values; accepted 'x, y' or 'x, y, z'"),
+        ("100, 100, 50, 1\n900, 100, 50, 1\n", r"4 values; accepted 'x, y' or 'x, y, z'"),
+    ],
+)
+def test_bad_nodes_files_say_what_is_accepted(tmp_path, text, message):
+    path = tmp_path / "nodes.csv"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        resolve(nodes=path)
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"scenario": {"nodes_m": [[100, 100, 50], [900, 100]]}}, r"every row \(x, y\) or"),
+        ({"scenario": {"nodes_m": [[100, 100, -1], [900, 100, 9]]}}, "positive down"),
+        ({"channel": {"node_depths_m": [100.0, 90.0]}}, r"one depth per node of .*\(7\)"),
+        ({"channel": {"auv_depths_m": [10.0]}}, r"at least one depth per AUV \(scenario.n_auvs=2"),
+        ({"channel": {"auv_depths_m": [10.0, 120.0]}}, "shallowest node's seabed, 100 m"),
+    ],
+)
+def test_bad_depths_say_what_is_accepted(data, message):
+    with pytest.raises(ConfigError, match=message):
+        Config.from_dict(data)

@@ -78,7 +78,7 @@ def test_every_pointer_of_the_view_is_an_owned_guarded_buffer(guarded, n_envs):
     m.reset(np.random.RandomState(0))
     move(m, np.tile(STRAIGHT * 2, (n_envs, 1)) if n_envs else np.array(STRAIGHT * 2))
     pointers = _pointers(m._view)
-    own = len(rules.CONSTANTS) + len(rules.INPUTS)  # 5 constants, 14 slot buffers
+    own = len(rules.CONSTANTS) + len(rules.INPUTS)  # 7 constants, 14 slot buffers
     assert len(pointers) == sum(len(native.FIELDS[s]) for s in ("State", "Log", "Network")) + own
     assert {k for k, v in pointers.items() if not guarded.owns(v)} == set()
     assert guarded.intact()

@@ -96,7 +96,7 @@ def test_nodes_from_a_csv_file(tmp_path):
     ("text", "message"),
     [
         ("1, 2\n3, x\n", r"nodes.csv:2: '3, x' is not a row of numbers"),
-        ("100, 200, 30\n400, 500, 40\n", r"3 values; accepted 'x, y'"),
+        ("100, 200, 30, 1\n400, 500, 40, 1\n", r"4 values; accepted 'x, y' or 'x, y, z'"),
         ("100, 200\n", r"nodes_m"),  # one node: the config's own bounds say 2 to 30
         ("100, 200\n5000, 10\n", r"nodes_m\[1\]"),  # outside the area
     ],

@@ -42,6 +42,13 @@ def channel_draws_per_auv(n_auvs: int) -> int:
     return 1 + 4 * n_auvs
 
 
+def constant(values: list[float]) -> FloatArray:
+    """`values` in an array the compiled rules may read (`native.allocate`)."""
+    out = native.allocate((len(values),), float)
+    out[:] = values
+    return out
+
+
 class Mission(native.Frozen):
     """State and rules of one multi-AUV data-collection episode, or of B of them at once.
 
@@ -56,6 +63,8 @@ class Mission(native.Frozen):
     log: MissionLog
     inv_area: FloatArray
     inv_diag: float
+    auv_depth_m: FloatArray
+    node_depth_m: FloatArray
 
     def __init__(
         self, cfg: Config, random_layout_per_episode: bool = False, n_envs: int | None = None
@@ -79,6 +88,11 @@ class Mission(native.Frozen):
         """The config's constants for the rules, a read-only (1,) record of
         `rules.PARAMS_DTYPE`."""
         self.inv_diag = float(self.params["inv_diag_per_m"][0])
+        auv_m, node_m = cfg.channel.depths_m(self.n_auvs, self.n_nodes)
+        self.auv_depth_m = native.read_only(constant(auv_m))
+        """(N,) each AUV's depth in the link budgets (zeros with the channel's depth off)."""
+        self.node_depth_m = native.read_only(constant(node_m))
+        """(K,) each node's seabed depth in the link budgets (zeros with depth off)."""
         self.term_values = native.allocate((*(self.batch or (1,)), len(REWARD_TERMS)), float)
         """The last slot's reward terms, (B, terms) in the order of REWARD_TERMS."""
         self._bind()
@@ -126,6 +140,8 @@ class Mission(native.Frozen):
             "channel": self.network.channel.constants,
             "dtheta_rad": self.actions.dtheta_rad,
             "dv_mps": self.actions.dv_mps,
+            "auv_depth_m": self.auv_depth_m,
+            "node_depth_m": self.node_depth_m,
         }
         native.fill(view, {**constants, **self._inputs})
         native.fill(view.s, self._arrays)

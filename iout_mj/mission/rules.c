@@ -207,7 +207,7 @@ void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
                         m->link_per + a0, m->link_packets_sent + a0,
                         m->link_packets_received + a0};
     iout_serve_env(&m->net, e, n, k, m->link, m->channel, p->k_reset, p->aoi_max, positions_m,
-                   s->action + 4 * a0 + 2, s->action + 4 * a0 + 3, 4, active,
+                   m->auv_depth_m, m->node_depth_m, s->action + 4 * a0 + 2, s->action + 4 * a0 + 3, 4, active,
                    s->distance_m + a0 * k, uplink_ok, req_j, stored_j, harvested_j, delivered,
                    &out);
 
@@ -296,8 +296,8 @@ int64_t iout_start(const Mission *m, const bool *restarted)
     for (int64_t e = 0; e < m->n_envs; e++) {
         if (!restarted[e])
             continue;
-        iout_distances(s->positions_m + 2 * n * e, n, m->net.nodes_m + 2 * k * e, k,
-                       m->channel->dz_m, s->distance_m + n * k * e);
+        iout_distances(s->positions_m + 2 * n * e, m->auv_depth_m, n, m->net.nodes_m + 2 * k * e,
+                       m->node_depth_m, k, s->distance_m + n * k * e);
         for (int64_t a = e * n; a < (e + 1) * n; a++) {
             double x = s->positions_m[2 * a], y = s->positions_m[2 * a + 1];
             s->dock_dist_m[a] = hypot(x - p->dock_x_m, y - p->dock_y_m);

@@ -117,7 +117,7 @@ SIZES = (
     "n_path",
 )
 """The sizes in a mission's view, which bound every index the rules use (checked in C)."""
-CONSTANTS = ("p", "link", "channel", "dtheta_rad", "dv_mps")
+CONSTANTS = ("p", "link", "channel", "dtheta_rad", "dv_mps", "auv_depth_m", "node_depth_m")
 """The read-only constants a mission's view points to."""
 
 native.require_fields(

@@ -286,7 +286,6 @@ def channel_values(channel: ChannelConfig, cfg: AcousticsConfig) -> dict[str, fl
     delay = channel.handshake_legs / sound_speed_mps(channel)
     return {
         "enabled": int(bool(channel.features)),
-        "dz_m": channel.node_depth_m - channel.auv_depth_m if on("depth") else 0.0,
         "delay_s_per_m": delay if on("propagation") else 0.0,
         "data_s": cfg.data_s,
         "data_rate_bps": cfg.data_rate_bps,

@@ -1,6 +1,7 @@
 /* The sensor network's slot rules and the link budget, compiled (world/network.py states the
  * rules; this file is their one implementation). */
 #include <math.h>
+#include <stddef.h>
 
 #include "../native.h"
 
@@ -54,14 +55,17 @@ int64_t iout_summarise(const Network *net, int64_t n_envs, int64_t k)
     return IOUT_OK;
 }
 
-/* AUV-node ranges: horizontal, or slant with the depth difference dz_m (0: the paper's). */
-void iout_distances(const double *auv_xy, int64_t n, const double *nodes_m, int64_t k,
-                    double dz_m, double *distance_m)
+/* AUV-node ranges: slant, with the depth difference node_depth_m[j] - auv_depth_m[i] (NULL
+ * depths: 0), and horizontal where that difference is 0 (the paper's). */
+void iout_distances(const double *auv_xy, const double *auv_depth_m, int64_t n,
+                    const double *nodes_m, const double *node_depth_m, int64_t k,
+                    double *distance_m)
 {
     for (int64_t i = 0; i < n; i++)
         for (int64_t j = 0; j < k; j++) {
             double d = hypot(auv_xy[2 * i] - nodes_m[2 * j], auv_xy[2 * i + 1] - nodes_m[2 * j + 1]);
-            distance_m[i * k + j] = dz_m == 0.0 ? d : hypot(d, dz_m);
+            double dz = (node_depth_m ? node_depth_m[j] : 0.0) - (auv_depth_m ? auv_depth_m[i] : 0.0);
+            distance_m[i * k + j] = dz == 0.0 ? d : hypot(d, dz);
         }
 }
 
@@ -246,7 +250,7 @@ static void serve_channel(const Network *net, int64_t e, int64_t n, int64_t k, c
 /* One slot of env e's nodes; the node indices must lie in [0, k) (checked by the callers). */
 void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
                     const Channel *ch, int64_t k_reset, double aoi_max, const double *auv_xy,
-                    const int64_t *wet, const int64_t *data, int64_t node_stride,
+                    const double *auv_depth_m, const double *node_depth_m, const int64_t *wet, const int64_t *data, int64_t node_stride,
                     const bool *active, double *distance_m, bool *uplink_ok,
                     double *uplink_req_j, double *uplink_stored_j, double *harvested_j,
                     bool *delivered, const LinkOutcomes *out)
@@ -262,7 +266,7 @@ void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const L
         reference[j] = -1;
         harvested_j[j] = 0.0;
     }
-    iout_distances(auv_xy, n, nodes, k, ch->dz_m, distance_m);
+    iout_distances(auv_xy, auv_depth_m, n, nodes, node_depth_m, k, distance_m);
     for (int64_t i = 0; i < n; i++) {
         int64_t up = data[i * node_stride], charge = wet[i * node_stride];
         for (int64_t j = 0; j < k; j++) {
@@ -340,18 +344,19 @@ int64_t iout_serve(const Network *net, int64_t e, int64_t n_envs, int64_t n, int
     int64_t status = check_serve("iout_serve", e, n_envs, n, k, wet, data, node_stride);
     if (status)
         return status;
-    iout_serve_env(net, e, n, k, link, &paper, k_reset, aoi_max, auv_xy, wet, data, node_stride,
-                   active, distance_m, uplink_ok, uplink_req_j, uplink_stored_j, harvested_j,
+    iout_serve_env(net, e, n, k, link, &paper, k_reset, aoi_max, auv_xy, NULL, NULL, wet, data,
+                   node_stride, active, distance_m, uplink_ok, uplink_req_j, uplink_stored_j, harvested_j,
                    delivered, &none);
     return IOUT_OK;
 }
 
 /* The same through a channel, with the per-AUV link outcomes (for their tests). Every AUV
- * names node `wet[i]` to charge and `data[i]` to collect from; `draws` is (n,
- * IOUT_CHANNEL_DRAWS(n)). */
+ * names node `wet[i]` to charge and `data[i]` to collect from; the depths are (n,) and (k,);
+ * `draws` is (n, IOUT_CHANNEL_DRAWS(n)). */
 int64_t iout_serve_channel(const Network *net, int64_t e, int64_t n_envs, int64_t n, int64_t k,
                            const Link *link, const Channel *ch, int64_t k_reset, double aoi_max,
-                           const double *auv_xy, const int64_t *wet, const int64_t *data,
+                           const double *auv_xy, const double *auv_depth_m,
+                           const double *node_depth_m, const int64_t *wet, const int64_t *data,
                            const bool *active, const double *draws, double *distance_m,
                            bool *uplink_ok, double *sinr_db, double *per, int64_t *sent,
                            int64_t *received)
@@ -362,7 +367,7 @@ int64_t iout_serve_channel(const Network *net, int64_t e, int64_t n_envs, int64_
     double req_j[n], stored_j[n], harvested_j[k];
     bool delivered[k];
     LinkOutcomes out = {draws, sinr_db, per, sent, received};
-    iout_serve_env(net, e, n, k, link, ch, k_reset, aoi_max, auv_xy, wet, data, 1, active,
-                   distance_m, uplink_ok, req_j, stored_j, harvested_j, delivered, &out);
+    iout_serve_env(net, e, n, k, link, ch, k_reset, aoi_max, auv_xy, auv_depth_m, node_depth_m,
+                   wet, data, 1, active, distance_m, uplink_ok, req_j, stored_j, harvested_j, delivered, &out);
     return IOUT_OK;
 }

@@ -107,6 +107,8 @@ class SensorNetwork(native.Frozen):
         self.acoustic = acoustic
         self.bits_per_delivery = acoustics.bits_per_delivery(acoustic)
         channel = channel or ChannelConfig()
+        self.channel_config = channel
+        """The channel's config (its depths: `ChannelConfig.depths_m`)."""
         self.link = acoustics.LinkBudget(acoustic, channel)
         self.channel = acoustics.ChannelConstants(channel, acoustic)
         """The channel's constants (every feature off by default: the paper's channel)."""
