@@ -12,14 +12,19 @@ added-mass terms, which would count the Munk moment twice).
 from __future__ import annotations
 
 import ctypes
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
+import numpy as np
 
 from iout_mj.errors import IoutError
+from iout_mj.types import FloatArray, IntArray
 
 PLUGIN = "iout.added_mass"
 """The plugin's registered name (the MJCF's `<plugin plugin=...>`)."""
+NSTATE = 10
+"""Plugin state per instance (added_mass.c): F_o (3, body axes), F_p (3, world), qvel (3), yaw."""
 FLUID_ADDED_MASS = slice(6, 12)
 """MuJoCo's virtual mass and inertia in each row of `geom_fluid` (its ellipsoid model)."""
 
@@ -60,3 +65,44 @@ def disable_fluid_added_mass(model: mujoco.MjModel, geoms: list[int]) -> None:
     the plugin applies the hull's."""
     for g in geoms:
         model.geom_fluid[g, FLUID_ADDED_MASS] = 0.0
+
+
+@dataclass(frozen=True)
+class Hulls:
+    """Every plugin instance of a compiled model, as added_mass.c reads it (the MuJoCo Warp
+    stepper applies the same terms with these)."""
+
+    dofs: IntArray
+    """(H, 3) dof addresses of x, y, yaw."""
+    qpos_yaw: IntArray
+    """(H,) qpos address of yaw."""
+    coefficients: FloatArray
+    """(H, 4): m_b (kg), I_b (kg m^2), D = X_udot - Y_vdot (kg), c = -Y_rdot (kg m)."""
+
+
+def hulls(model: mujoco.MjModel) -> Hulls:
+    """The plugin instances of `model` (all of its plugins: the scene has no other)."""
+    values = bytes(model.plugin_attr).split(b"\0")
+    per_instance = 4  # body, xudot, yvdot, yrdot (added_mass.c's ATTRIBUTES)
+    dofs, qpos_yaw, coefficients = [], [], []
+    for i in range(model.nplugin):
+        start = int(model.plugin_attradr[i])
+        first = len(bytes(model.plugin_attr)[:start].split(b"\0")) - 1
+        body, x_udot, y_vdot, y_rdot = values[first : first + per_instance]
+        b = model.body(body.decode())
+        joints = range(int(b.jntadr[0]), int(b.jntadr[0]) + 3)
+        dofs.append([int(model.jnt_dofadr[j]) for j in joints])
+        qpos_yaw.append(int(model.jnt_qposadr[joints[2]]))
+        coefficients.append(
+            [
+                float(b.mass[0]),
+                float(b.inertia[2]),
+                float(x_udot) - float(y_vdot),
+                -float(y_rdot),
+            ]
+        )
+    return Hulls(
+        np.array(dofs, dtype=np.int64).reshape(-1, 3),
+        np.array(qpos_yaw, dtype=np.int64),
+        np.array(coefficients, dtype=np.float64).reshape(-1, 4),
+    )

@@ -157,8 +157,10 @@ def _add_markers(spec: mujoco.MjSpec, cfg: Config) -> None:
     )
 
 
-def build_scene(cfg: Config) -> mujoco.MjSpec:
-    """The full scene for `cfg`: arena, markers, and N AUVs at their start positions."""
+def build_scene(cfg: Config, plugin: bool = True) -> mujoco.MjSpec:
+    """The full scene for `cfg`: arena, markers, and N AUVs at their start positions; without
+    `plugin`, the AUVs lack their added-mass plugin instances (for MuJoCo Warp, which applies
+    the same terms itself)."""
     spec = mujoco.MjSpec.from_file(str(names.ARENA_XML))
     spec.option.timestep = cfg.physics.timestep_s
     spec.option.density = cfg.motion.water_density_kgpm3
@@ -168,7 +170,8 @@ def build_scene(cfg: Config) -> mujoco.MjSpec:
         frame = spec.worldbody.add_frame(pos=[0.0, 0.0, AUV_DEPTH_M])
         auv = auv_spec(cfg)
         spec.attach(auv, prefix=names.auv_prefix(i), frame=frame)
-        added_mass.attach_instance(spec, auv, names.auv_prefix(i))
+        if plugin:
+            added_mass.attach_instance(spec, auv, names.auv_prefix(i))
         # The area's edges are a fence: joint limits the vehicle stops against.
         for joint, side in (
             (names.JOINT_X, cfg.scenario.area_m[0]),
@@ -180,10 +183,11 @@ def build_scene(cfg: Config) -> mujoco.MjSpec:
     return spec
 
 
-def build_model(cfg: Config) -> mujoco.MjModel:
-    """Compiled model of `build_scene(cfg)`; AUVs sit at the origin until the task places them.
-    MuJoCo's own added mass of the hulls' fluid ellipsoids is off: the plugin applies theirs."""
-    model = build_scene(cfg).compile()
+def build_model(cfg: Config, plugin: bool = True) -> mujoco.MjModel:
+    """Compiled model of `build_scene(cfg, plugin)`; AUVs sit at the origin until the task
+    places them. MuJoCo's own added mass of the hulls' fluid ellipsoids is off: the plugin
+    applies theirs."""
+    model = build_scene(cfg, plugin).compile()
     added_mass.disable_fluid_added_mass(
         model,
         [

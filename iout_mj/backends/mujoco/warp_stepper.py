@@ -10,6 +10,11 @@ keep only ~60 um, so each world's x and y are re-based to the AUVs' start of slo
 arena's walls (the slide joints' limits) moved by the same offsets (the scene has no contacts
 and a uniform current: nothing else depends on absolute position); the offsets are added back
 in float64.
+
+MuJoCo Warp runs no C plugin: the hulls' added mass (the C backend's iout.added_mass plugin) is
+applied here by two kernels with the same equations, one before every substep (its force, as
+`qfrc_applied`) and one after (the hull's other forces, from the velocity change); its state
+goes to the device and back with each physics' plugin state.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from iout_mj.backends.mujoco import added_mass, vehicle
 from iout_mj.types import BoolArray
 
 GPU_EXTRA = "pip install 'iout-mj[gpu]' (mujoco-warp and warp-lang)"
@@ -70,7 +76,66 @@ def _kernels() -> dict[str, Any]:
         w, j = wp.tid()
         path[substep, w, j] = qpos[w, j]
 
-    _KERNELS.update(meter=meter, record=record)
+    @wp.kernel
+    def added_mass_force(
+        qpos: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        qvel: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        wind: wp.array(dtype=wp.vec3),  # type: ignore[valid-type]
+        dofs: wp.array2d(dtype=int),  # type: ignore[valid-type]
+        qpos_yaw: wp.array(dtype=int),  # type: ignore[valid-type]
+        coef: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        state: wp.array3d(dtype=float),  # type: ignore[valid-type]
+        qfrc_applied: wp.array2d(dtype=float),  # type: ignore[valid-type]
+    ) -> None:
+        w, h = wp.tid()  # added_mass.c's compute(), line for line
+        mb, ib, dm, c = coef[h, 0], coef[h, 1], coef[h, 2], coef[h, 3]
+        yaw = qpos[w, qpos_yaw[h]]
+        cy, sy = wp.cos(yaw), wp.sin(yaw)
+        vx = qvel[w, dofs[h, 0]] - wind[w][0]
+        vy = qvel[w, dofs[h, 1]] - wind[w][1]
+        u, v, r = cy * vx + sy * vy, -sy * vx + cy * vy, qvel[w, dofs[h, 2]]
+        gv = state[w, h, 1] - mb * r * u
+        gr = state[w, h, 2] - dm * u * v - c * u * r
+        det = (mb + dm) * ib - c * c
+        vdot = (ib * gv - c * gr) / det
+        rdot = ((mb + dm) * gr - c * gv) / det
+        fu = dm * v * r + c * r * r
+        fv = mb * vdot - gv
+        fr = ib * rdot - state[w, h, 2]
+        fx, fy = cy * fu - sy * fv, sy * fu + cy * fv
+        qfrc_applied[w, dofs[h, 0]] = fx
+        qfrc_applied[w, dofs[h, 1]] = fy
+        qfrc_applied[w, dofs[h, 2]] = fr
+        state[w, h, 3] = fx
+        state[w, h, 4] = fy
+        state[w, h, 5] = fr
+        for j in range(3):
+            state[w, h, 6 + j] = qvel[w, dofs[h, j]]
+        state[w, h, 9] = yaw
+
+    @wp.kernel
+    def added_mass_update(
+        qvel: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        dofs: wp.array2d(dtype=int),  # type: ignore[valid-type]
+        coef: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        rate: float,
+        state: wp.array3d(dtype=float),  # type: ignore[valid-type]
+    ) -> None:
+        w, h = wp.tid()  # added_mass.c's advance()
+        fx = coef[h, 0] * (qvel[w, dofs[h, 0]] - state[w, h, 6]) * rate - state[w, h, 3]
+        fy = coef[h, 0] * (qvel[w, dofs[h, 1]] - state[w, h, 7]) * rate - state[w, h, 4]
+        fr = coef[h, 1] * (qvel[w, dofs[h, 2]] - state[w, h, 8]) * rate - state[w, h, 5]
+        cy, sy = wp.cos(state[w, h, 9]), wp.sin(state[w, h, 9])
+        state[w, h, 0] = cy * fx + sy * fy
+        state[w, h, 1] = -sy * fx + cy * fy
+        state[w, h, 2] = fr
+
+    _KERNELS.update(
+        meter=meter,
+        record=record,
+        added_mass_force=added_mass_force,
+        added_mass_update=added_mass_update,
+    )
     return _KERNELS
 
 
@@ -97,9 +162,12 @@ class WarpStepper:
         p0, b = physics[0], len(physics)
         mjm = p0.model.ptr
         pairs = p0._power_sensors.reshape(-1, 2)  # (N * 2 actuators, force/velocity)
+        # MuJoCo Warp refuses a model with C plugins: the same scene without them (the mission
+        # changes no model field but the markers' positions and the current, set per slot)
+        device_model = vehicle.build_model(p0.cfg, plugin=False)
         with wp.ScopedDevice(self.device):
-            self.model = mjw.put_model(mjm)
-            self.data = mjw.make_data(mjm, nworld=b)
+            self.model = mjw.put_model(device_model)
+            self.data = mjw.make_data(device_model, nworld=b)
             self.wind = wp.zeros(b, dtype=wp.vec3)
             self.model.opt.wind = self.wind  # one current per world
             self.force_adr = wp.array(pairs[:, 0].astype(np.int32), dtype=int)
@@ -110,6 +178,11 @@ class WarpStepper:
             self.model.jnt_range = self.jnt_range
             self.work = wp.zeros((b, len(pairs)), dtype=float)
             self.path = wp.zeros((nstep, b, mjm.nq), dtype=float)
+            hulls = added_mass.hulls(mjm)
+            self.hull_dofs = wp.array(hulls.dofs.astype(np.int32), dtype=int)
+            self.hull_qpos_yaw = wp.array(hulls.qpos_yaw.astype(np.int32), dtype=int)
+            self.hull_coef = wp.array(hulls.coefficients.astype(np.float32), dtype=float)
+            self.hull_state = wp.zeros((b, len(hulls.dofs), added_mass.NSTATE), dtype=float)
         self._shape, self._graph = (b, nstep), None
         self._xy = np.concatenate([p0._qx, p0._qy])
         self._joint_qpos = mjm.jnt_qposadr.copy()  # slide and hinge joints: one entry each
@@ -118,8 +191,31 @@ class WarpStepper:
     def _substeps(self, nstep: int) -> None:
         wp, k = self.wp, _kernels()
         b, nq = self._shape[0], self.path.shape[2]
+        nhull = self.hull_state.shape[1]
         for s in range(nstep):
+            if nhull:
+                wp.launch(
+                    k["added_mass_force"],
+                    dim=(b, nhull),
+                    inputs=[
+                        self.data.qpos,
+                        self.data.qvel,
+                        self.wind,
+                        self.hull_dofs,
+                        self.hull_qpos_yaw,
+                        self.hull_coef,
+                        self.hull_state,
+                    ],
+                    outputs=[self.data.qfrc_applied],
+                )
             self.mjw.step(self.model, self.data)
+            if nhull:
+                wp.launch(
+                    k["added_mass_update"],
+                    dim=(b, nhull),
+                    inputs=[self.data.qvel, self.hull_dofs, self.hull_coef, 1.0 / self.dt_s],
+                    outputs=[self.hull_state],
+                )
             wp.launch(
                 k["meter"],
                 dim=(b, self.work.shape[1]),
@@ -157,16 +253,20 @@ class WarpStepper:
             shift = offset[:, self._joint_qpos][..., None]
             self.jnt_range.assign((self.base_range - shift).astype(np.float32))
             self.work.zero_()
+            plugin_state = np.stack([p.data.ptr.plugin_state for p in physics])
+            self.hull_state.assign(plugin_state.reshape(self.hull_state.shape).astype(np.float32))
             self._run(nstep)
             wp.synchronize_device(self.device)
             end_qpos = self.data.qpos.numpy().astype(np.float64) + offset
             end_qvel = self.data.qvel.numpy().astype(np.float64)
             path = self.path.numpy().astype(np.float64) + offset[None]
             work = self.work.numpy().astype(np.float64).reshape(len(physics), -1, 2)
+            plugin_state = self.hull_state.numpy().astype(np.float64).reshape(len(physics), -1)
         diverged = ~(np.isfinite(end_qpos).all(axis=1) & np.isfinite(end_qvel).all(axis=1))
         for i, p in enumerate(physics):
             d = p.data.ptr
             d.qpos[:], d.qvel[:] = end_qpos[i], end_qvel[i]
+            d.plugin_state[:] = plugin_state[i]
             d.time += nstep * self.dt_s
             p.meter.add(work[i])
             p.substep_qpos = path[:, i]
