@@ -178,6 +178,12 @@ def build_parser() -> argparse.ArgumentParser:
     _mission_arguments(p, width=960, height=540)
     p.add_argument("--out", default="renders", help="folder for mission.{mp4,png,json}")
     p.add_argument("--no-video", action="store_true", help="metrics and figure only (faster)")
+    p.add_argument(
+        "--trace",
+        help="write a per-slot trace to FILE.csv (one row per slot and link) and FILE.json "
+        "(nested per slot): positions, depths, transmissions, SINR, PER, packets, bits, AoI",
+        metavar="FILE",
+    )
     p.set_defaults(func="cmd_mission")
 
     p = sub.add_parser("render", help="a mission to MP4 (headless EGL)", **fmt)

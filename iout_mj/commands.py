@@ -30,7 +30,8 @@ DIVERGED = 3
 
 
 def cmd_link_budget(args: argparse.Namespace) -> int:
-    cfg = load_config(args.config).acoustics
+    env = load_config(args.config)
+    cfg, channel = env.acoustics, env.channel
     d = np.asarray(args.distance, dtype=float)
     rows = [
         {
@@ -42,20 +43,22 @@ def cmd_link_budget(args: argparse.Namespace) -> int:
         }
         for di, hp, he, up, ue in zip(
             d,
-            acoustics.harvest_power_w(d, cfg),
-            acoustics.harvest_energy_j(d, cfg),
-            acoustics.uplink_power_w(d, cfg),
-            acoustics.uplink_energy_j(d, cfg),
+            acoustics.harvest_power_w(d, cfg, channel),
+            acoustics.harvest_energy_j(d, cfg, channel),
+            acoustics.uplink_power_w(d, cfg, channel),
+            acoustics.uplink_energy_j(d, cfg, channel),
             strict=True,
         )
     ]
+    links = _channel_links(env, d) if channel.features else None
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(json.dumps(rows if links is None else {"link": rows, "channel": links}, indent=2))
         return 0
     print(
         f"AET at {cfg.f_wet_khz:g} kHz, P_tx {cfg.p_tx_w:g} W; uplink at {cfg.f_data_khz:g} kHz,"
         f" {cfg.data_rate_bps / 1e3:g} kbit/s over {cfg.bandwidth_hz:g} Hz; "
         f"slot {cfg.charging_s:g} s; noise '{cfg.noise_model}'"
+        + ("" if channel.absorption == "thorp" else f"; absorption '{channel.absorption}'")
     )
     print(
         f"{'distance m':>11} {'harvest W':>11} {'harvest J':>11} {'uplink W':>11} {'uplink J':>11}"
@@ -66,7 +69,49 @@ def cmd_link_budget(args: argparse.Namespace) -> int:
             f"{r['harvest_energy_j']:>11.4g} {r['uplink_power_w']:>11.4g} "
             f"{r['uplink_energy_j']:>11.4g}"
         )
+    if links is not None:
+        _print_channel_links(channel, links)
     return 0
+
+
+LINK_COLUMNS = (
+    ("horizontal_m", "horiz m", ".1f"),
+    ("auv_depth_m", "AUV z m", ".1f"),
+    ("node_depth_m", "node z m", ".1f"),
+    ("range_m", "range m", ".1f"),
+    ("sound_speed_mps", "c m/s", ".1f"),
+    ("delay_s", "delay s", ".4f"),
+    ("usable_share", "usable", ".3f"),
+    ("uplink_cost_j", "cost J", ".4g"),
+    ("snr_db", "SNR dB", ".2f"),
+    ("per", "PER", ".3g"),
+    ("packets_sent", "sent", ".0f"),
+    ("packets_expected", "expected", ".1f"),
+)
+"""The channel table of `iout-mj link-budget`: key, heading, format."""
+
+
+def _channel_links(env: Any, horizontal_m: np.ndarray) -> list[dict[str, float]]:
+    """The channel's link budget at each horizontal range for every distinct pair of an AUV
+    depth and a node depth of the config (`acoustics.channel_link_budget`)."""
+    auv_m, node_m = env.channel.depths_m(env.scenario.n_auvs, env.scenario.n_nodes)
+    pairs = sorted({(a, z) for a in auv_m for z in node_m})  # (0, 0) with depth off
+    return [
+        acoustics.channel_link_budget(env.channel, env.acoustics, float(h), a, z)
+        for h in horizontal_m
+        for a, z in pairs
+    ]
+
+
+def _print_channel_links(channel: Any, links: list[dict[str, float]]) -> None:
+    print(
+        f"\nchannel: {', '.join(channel.features)}; one uplink alone in its slot, no fading "
+        "(usable: share of tau_data left by the handshake; cost: E_req x usable; SNR = SINR "
+        "without interference; expected: packets sent x (1 - PER))"
+    )
+    print(" ".join(f"{title:>9}" for _, title, _ in LINK_COLUMNS))
+    for r in links:
+        print(" ".join(f"{r[key]:>9{fmt}}" for key, _, fmt in LINK_COLUMNS))
 
 
 def cmd_validate_energy(args: argparse.Namespace) -> int:
@@ -114,6 +159,7 @@ def _run_mission(args: argparse.Namespace, out: Path, name: str, video: bool) ->
             slots=args.slots,
             name=name,
             trust_pickle=args.trust_pickle,
+            trace_path=Path(args.trace) if getattr(args, "trace", None) else None,
         )
 
 

@@ -1,6 +1,9 @@
 """The acoustic network layer's second part: Francois-Garrison absorption, per-AUV and per-node
 depths, the link budget by range and depth, the mission trace, and the channel in every env."""
 
+import csv
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -136,3 +139,86 @@ def test_bad_nodes_files_say_what_is_accepted(tmp_path, text, message):
 def test_bad_depths_say_what_is_accepted(data, message):
     with pytest.raises(ConfigError, match=message):
         Config.from_dict(data)
+
+
+# ------------------------------------------------------------------ the mission trace
+@pytest.mark.parametrize("features", [[], ["depth", "propagation", "packets", "fading"]])
+def test_a_five_slot_trace_has_every_link_and_the_missions_bits(tmp_path, features):
+    from iout_mj.experiments.mission import TRACE_COLUMNS, run_mission
+
+    cfg = Config.from_dict({"channel": {"features": features}})
+    summary = run_mission(
+        "planner",
+        cfg,
+        "kinematic",
+        seed=1,
+        out=tmp_path,
+        video=False,
+        slots=5,
+        trace_path=tmp_path / "trace",
+    )
+    with (tmp_path / "trace.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert tuple(rows[0]) == TRACE_COLUMNS
+    assert [(int(r["slot"]), int(r["auv"])) for r in rows] == [
+        (t, i) for t in range(1, 6) for i in range(2)
+    ]
+    bits = sum(float(r["bits_delivered"]) for r in rows)
+    assert bits == pytest.approx(summary["metrics"]["delivered_bits"]) and bits > 0
+    nested = json.loads((tmp_path / "trace.json").read_text())["slots"]
+    assert [s["slot"] for s in nested] == [1, 2, 3, 4, 5] and len(nested[0]["nodes"]) == 7
+    assert sum(n["bits_delivered"] for s in nested for n in s["nodes"]) == pytest.approx(bits)
+    depth = 50.0 if features else 0.0
+    assert {float(r["auv_depth_m"]) for r in rows} == {depth}
+    if features:  # the channel's per-link outcomes; packets arrive for the bits
+        sent = [int(r["packets_sent"]) for r in rows]
+        assert all(r["sinr_db"] != "" for r in rows if int(r["packets_sent"]))
+        assert sum(int(r["packets_received"]) for r in rows) * 1000 >= bits > 0 < sum(sent)
+    else:
+        assert all(r["sinr_db"] == "" and r["packets_sent"] == "0" for r in rows)
+
+
+# ------------------------------------------------------------------ iout-mj link-budget
+def link_budget(capsys, *args: str) -> str:
+    from iout_mj.cli import main
+
+    assert main(["link-budget", *args]) == 0
+    return capsys.readouterr().out
+
+
+def test_link_budget_prints_the_channel_by_range_and_depth(capsys, tmp_path):
+    paper = link_budget(capsys, "--distance", "100", "300")
+    assert "channel:" not in paper and "absorption" not in paper
+    path = tmp_path / "env.yaml"
+    cfg = Config.from_dict(
+        {
+            "scenario": {"nodes_m": [[100, 100, 80], [900, 100, 120]]},
+            "channel": {"features": ["depth", "propagation", "packets"], "auv_depth_m": 40.0},
+        }
+    )
+    cfg.save(path)
+    text = link_budget(capsys, "--config", str(path), "--distance", "100", "300")
+    assert text.startswith(paper.splitlines()[0]) and "PER" in text
+    data = json.loads(
+        link_budget(capsys, "--config", str(path), "--distance", "100", "300", "--json")
+    )
+    assert [r["distance_m"] for r in data["link"]] == [100.0, 300.0]
+    links = data["channel"]
+    assert [(r["horizontal_m"], r["node_depth_m"]) for r in links] == [
+        (100.0, 80.0),
+        (100.0, 120.0),
+        (300.0, 80.0),
+        (300.0, 120.0),
+    ]
+    r = links[1]
+    c = float(acoustics.mackenzie_sound_speed_mps(10.0, 35.0, 0.5 * (40.0 + 100.0)))
+    assert r["range_m"] == pytest.approx(np.hypot(100.0, 80.0))
+    assert r["sound_speed_mps"] == pytest.approx(c) and r["delay_s"] == pytest.approx(
+        r["range_m"] / c
+    )
+    assert r["usable_share"] == pytest.approx(1 - 3 * r["delay_s"] / 25.0)
+    assert r["snr_db"] == pytest.approx(10 * np.log10(2.0**12 - 1))
+    assert r["packets_sent"] == np.floor(12000 * 25.0 * r["usable_share"] / 1000)
+    assert r["packets_expected"] == pytest.approx(r["packets_sent"] * (1 - r["per"]))
+    need = float(acoustics.uplink_energy_j(r["range_m"], AcousticsConfig()))
+    assert r["uplink_cost_j"] == pytest.approx(need * r["usable_share"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import shutil
@@ -41,6 +42,164 @@ def non_finite(metrics: dict[str, Any]) -> list[str]:
     ]
 
 
+TRACE_COLUMNS = (
+    "slot",
+    "auv",
+    "auv_x_m",
+    "auv_y_m",
+    "auv_depth_m",
+    "active",
+    "docked",
+    "aet_node",
+    "uplink_node",
+    "node_x_m",
+    "node_y_m",
+    "node_depth_m",
+    "node_energy_j",
+    "range_m",
+    "uplink_ok",
+    "sinr_db",
+    "per",
+    "packets_sent",
+    "packets_received",
+    "bits_delivered",
+    "node_aoi",
+    "mean_aoi",
+)
+"""The columns of a mission trace's CSV, one row per slot and link (AUV i's uplink):
+
+- slot: 1 to T, the slot just flown; auv: i.
+- auv_x_m, auv_y_m, auv_depth_m: AUV i at the end of the slot (where its links were
+  budgeted); depth 0 with the channel's depth off (the paper's plane).
+- active: not docked at the start of the slot (only active AUVs charge and collect);
+  docked: at its end.
+- aet_node, uplink_node: the nodes AUV i charges (AET) and collects from (the action).
+- node_x_m, node_y_m, node_depth_m, node_energy_j: that uplink node, its energy stored after
+  the slot (harvest in, uplink cost out).
+- range_m: AUV i to its uplink node (slant with depth on).
+- uplink_ok: the node's update reached the network and AUV i named it.
+- sinr_db, per: the uplink's SINR at AUV i and its packet error rate (empty: the paper's
+  channel, or no transmission reached AUV i); packets_sent by the node, packets_received at
+  any AUV (0 on the paper's channel).
+- bits_delivered: the node's bits that arrived this slot, on the row of the first active AUV
+  naming it (0 on the others): the column sums to the mission's delivered bits.
+- node_aoi: the uplink node's AoI after the slot; mean_aoi: over all nodes.
+
+The JSON trace holds the same per slot, nested: {"slot", "auvs": [...], "nodes": [...]},
+every node's position, depth, energy, AoI and bits with its slot, for a network simulator to
+replay (positions, depths and the transmissions with their outcomes)."""
+
+
+class MissionTracer:
+    """Records one env's mission after every slot (`record`), then writes the trace as CSV
+    (`TRACE_COLUMNS`) and JSON."""
+
+    def __init__(self, env: Any):
+        self.mission = env.unwrapped.mission
+        self.slots: list[dict[str, Any]] = []
+        self._bits = np.zeros(self.mission.n_nodes)  # a reset's: no bits, no AUV docked
+        self._docked = np.zeros(self.mission.n_auvs, dtype=bool)
+
+    def record(self, info: dict[str, Any]) -> None:
+        """The slot just flown (call after each step, with its info)."""
+        m, net, s = self.mission, self.mission.network, self.mission.state
+        slot = int(s.slot)
+        links = info.get("channel") or {}
+        delta = net.node_bits - self._bits
+        credited: set[int] = set()
+        auvs = []
+        for i in range(m.n_auvs):
+            aet, up = (int(v) for v in s.action[i, 2:4])
+            active = not bool(self._docked[i])
+            first = active and up not in credited
+            credited |= {up} if active else set()
+            auvs.append(
+                {
+                    "auv": i,
+                    "position_m": s.positions_m[i].tolist(),
+                    "depth_m": float(m.auv_depth_m[i]),
+                    "active": active,
+                    "docked": bool(s.docked[i]),
+                    "aet_node": aet,
+                    "uplink_node": up,
+                    "range_m": float(s.distance_m[i, up]),
+                    "uplink_ok": bool(m.log.uplink_ok[slot - 1, i]),
+                    "sinr_db": _finite(links.get("sinr_db"), i),
+                    "per": _finite(links.get("per"), i),
+                    "packets_sent": int(links["packets_sent"][i]) if links else 0,
+                    "packets_received": int(links["packets_received"][i]) if links else 0,
+                    "bits_delivered": float(delta[up]) if first else 0.0,
+                }
+            )
+        nodes = [
+            {
+                "node": j,
+                "position_m": net.nodes_m[j].tolist(),
+                "depth_m": float(m.node_depth_m[j]),
+                "energy_j": float(net.energy_j[j]),
+                "aoi": float(net.aoi[j]),
+                "bits_delivered": float(delta[j]),
+            }
+            for j in range(m.n_nodes)
+        ]
+        self.slots.append(
+            {"slot": slot, "mean_aoi": float(net.mean_aoi), "auvs": auvs, "nodes": nodes}
+        )
+        self._bits = net.node_bits.copy()
+        self._docked = s.docked.copy()
+
+    def rows(self) -> list[dict[str, Any]]:
+        """The CSV's rows (`TRACE_COLUMNS`), one per slot and AUV."""
+        out = []
+        for slot in self.slots:
+            for a in slot["auvs"]:
+                node = slot["nodes"][a["uplink_node"]]
+                out.append(
+                    {
+                        "slot": slot["slot"],
+                        "auv": a["auv"],
+                        "auv_x_m": a["position_m"][0],
+                        "auv_y_m": a["position_m"][1],
+                        "auv_depth_m": a["depth_m"],
+                        "active": int(a["active"]),
+                        "docked": int(a["docked"]),
+                        "aet_node": a["aet_node"],
+                        "uplink_node": a["uplink_node"],
+                        "node_x_m": node["position_m"][0],
+                        "node_y_m": node["position_m"][1],
+                        "node_depth_m": node["depth_m"],
+                        "node_energy_j": node["energy_j"],
+                        "range_m": a["range_m"],
+                        "uplink_ok": int(a["uplink_ok"]),
+                        "sinr_db": "" if a["sinr_db"] is None else a["sinr_db"],
+                        "per": "" if a["per"] is None else a["per"],
+                        "packets_sent": a["packets_sent"],
+                        "packets_received": a["packets_received"],
+                        "bits_delivered": a["bits_delivered"],
+                        "node_aoi": node["aoi"],
+                        "mean_aoi": slot["mean_aoi"],
+                    }
+                )
+        return out
+
+    def write(self, path: Path) -> tuple[Path, Path]:
+        """`path` with suffix .csv and .json (the suffix given, if any, is replaced)."""
+        csv_path, json_path = path.with_suffix(".csv"), path.with_suffix(".json")
+        with csv_path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=TRACE_COLUMNS)
+            writer.writeheader()
+            writer.writerows(self.rows())
+        json_path.write_text(json.dumps({"slots": self.slots}, indent=1) + "\n")
+        return csv_path, json_path
+
+
+def _finite(values: Any, i: int) -> float | None:
+    """values[i] as a number, None where absent or NaN (no transmission reached the AUV)."""
+    if not values or not math.isfinite(values[i]):
+        return None
+    return float(values[i])
+
+
 def run_mission(
     policy: str = "planner",
     config: ConfigLike = None,
@@ -54,13 +213,15 @@ def run_mission(
     slots: int | None = None,
     name: str = "mission",
     trust_pickle: bool = False,
+    trace_path: Path | None = None,
 ) -> dict[str, Any]:
     """Fly one mission and write `<name>.json`, `<name>_trajectory.png`, and (with `video`)
     `<name>.mp4` plus its last frame `<name>.png` into `out`. `config` is resolved as for any
     env (`scenarios.resolve`; an `EnvSpec` as it is; None: the paper's N = 2, K = 7). A mission
     whose physics diverged, or with a non-finite metric, has `metrics["valid"] = False` and the
     error in `metrics["error"]`. With the random layout the nodes are drawn from the episode's
-    seed."""
+    seed. With `trace_path`, the per-slot trace is written there as .csv and .json
+    (`TRACE_COLUMNS`)."""
     spec = resolve(config, backend=backend)
     cfg = spec.config
     n_auvs, n_nodes = cfg.scenario.n_auvs, cfg.scenario.n_nodes
@@ -90,10 +251,13 @@ def run_mission(
         writer.__enter__()
     frames: list[np.ndarray] = []
     count = 0
+    tracer = MissionTracer(env) if trace_path is not None else None
 
     def on_step(info: dict[str, Any]) -> None:
         nonlocal frames, count
         bar.update(1)
+        if tracer is not None:
+            tracer.record(info)
         if writer is not None:
             frames = env.render()  # type: ignore[assignment]
             for f in frames:
@@ -119,6 +283,8 @@ def run_mission(
     trace = env.unwrapped.mission.trace()  # type: ignore[attr-defined]
     title = f"{policy}, N={n_auvs}, K={n_nodes}, {backend}"
     trajectory_figure(trace, out / f"{name}_trajectory.png", title=title)
+    if tracer is not None and trace_path is not None:
+        tracer.write(trace_path)
     summary = {
         "policy": policy,
         "n_auvs": n_auvs,

@@ -23,6 +23,8 @@ of a slot; Rician/Rayleigh fading and log-normal shadowing. `world.network` stat
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -332,3 +334,50 @@ class ChannelConstants(native.Frozen):
             native.address(per),
         )
         return per
+
+
+def channel_link_budget(
+    channel: ChannelConfig,
+    cfg: AcousticsConfig,
+    horizontal_m: float,
+    auv_depth_m: float,
+    node_depth_m: float,
+) -> dict[str, float]:
+    """One uplink through the channel at a horizontal range and a pair of depths, alone in
+    its slot and without fading (`world.network` states the rules): the slant range (with
+    'depth'), the sound speed and one-way delay, the share of tau_data left to the data by the
+    handshake (with 'propagation'), the node's E_req and what it pays for that window, the
+    AET harvest, the SNR at the AUV (the node's power makes it gamma_req = 2^(R/B) - 1; with no
+    other uplink it is also the SINR), the PER at it (with 'packets'), the packets sent and
+    those expected to arrive, and the bits expected per slot."""
+    dz_m = node_depth_m - auv_depth_m if channel.on("depth") else 0.0
+    range_m = float(np.hypot(horizontal_m, dz_m))
+    c_mps = sound_speed_mps(channel)
+    legs = channel.handshake_legs if channel.on("propagation") else 0
+    window_s = max(cfg.data_s - legs * range_m / c_mps, 0.0)
+    snr_db = required_snr_db(cfg)
+    constants = ChannelConstants(channel, cfg)
+    per = float(np.ravel(constants.packet_error_rate(snr_db))[0]) if channel.on("packets") else 0.0
+    sent = math.floor(cfg.data_rate_bps * window_s / channel.packet_bits)
+    need_j = float(uplink_energy_j(range_m, cfg, channel))
+    return {
+        "horizontal_m": float(horizontal_m),
+        "auv_depth_m": auv_depth_m if channel.on("depth") else 0.0,
+        "node_depth_m": node_depth_m if channel.on("depth") else 0.0,
+        "range_m": range_m,
+        "sound_speed_mps": c_mps,
+        "delay_s": range_m / c_mps,
+        "usable_share": window_s / cfg.data_s,
+        "harvest_energy_j": float(harvest_energy_j(range_m, cfg, channel)),
+        "uplink_energy_j": need_j,
+        "uplink_cost_j": need_j * window_s / cfg.data_s,
+        "snr_db": snr_db,
+        "per": per,
+        "packets_sent": float(sent) if channel.on("packets") else 0.0,
+        "packets_expected": sent * (1.0 - per) if channel.on("packets") else 0.0,
+        "bits_expected": (
+            sent * (1.0 - per) * channel.packet_bits
+            if channel.on("packets")
+            else cfg.data_rate_bps * window_s
+        ),
+    }
