@@ -204,6 +204,25 @@ def test_evaluate_skips_cells_a_policy_cannot_serve():
     assert "skipped ppo-n1-k7 at N=1, K=3" in out.stderr
 
 
+def test_evaluate_skips_the_n_no_general_policy_is_shipped_for_and_flies_the_rest():
+    from iout_mj.agents.policies import shipped_policies
+
+    lacking = [n for n in (3, 4) if f"ppo-general-n{n}" not in shipped_policies()]
+    if not lacking:
+        pytest.skip("a general policy is shipped for every N")
+    n = str(lacking[0])
+    out = run(
+        *("evaluate", "--policy", "ppo-general", "tour-scheduler", "--n-auvs", "1", n),
+        *("--nodes", "3", "--layout", "random", "--episodes", "1", "--backend", "kinematic"),
+        "--json",
+    )
+    cells = {(r["policy"], r["n_auvs"]) for r in json.loads(out.stdout)}
+    assert cells == {("ppo-general", 1), ("tour-scheduler", 1), ("tour-scheduler", int(n))}
+    assert f"skipped ppo-general at N={n}, K=3: unknown policy 'ppo-general-n{n}'" in out.stderr
+    alone = run("evaluate", "--policy", "ppo-general", "--n-auvs", n, "--nodes", "3", check=False)
+    assert alone.returncode != 0 and f"unknown policy 'ppo-general-n{n}'" in alone.stderr
+
+
 def readme_commands():
     """Every `iout-mj ...` example of the README (code blocks and the command table)."""
     text = (ROOT / "README.md").read_text()

@@ -119,30 +119,50 @@ def _cells(
     policies: list[str], specs: list[EnvSpec], trust_pickle: bool, training_seeds: list[int]
 ) -> tuple[list[tuple[str, EnvSpec]], list[str]]:
     """The (policy, scenario) cells a policy can serve (decided by its first training seed),
-    and why the others are skipped. An unknown or unreadable policy, or a learned policy's
-    training seed that is missing or cannot serve a cell its first seed serves, fails here,
-    before any worker starts."""
+    and why the others are skipped: a policy made for other spaces, or one that exists for
+    some cells and not for this one (`ppo-general` at an N nothing is shipped for). A policy
+    that serves no cell for want of existing (a wrong name, an unreadable file), or a learned
+    policy's training seed that is missing or cannot serve a cell its first seed serves,
+    fails here, before any worker starts."""
     cells, skipped = [], []
+    missing: dict[str, list[tuple[EnvSpec, PolicyError]]] = {}  # policy -> cells it lacks
     for name, spec in product(policies, specs):
         seeds = training_seeds if learned(name) else [0]
         env = scenario_env(dataclasses.replace(spec, backend="kinematic"))
         try:
             _load_seed(name, seeds[0], spec, env, trust_pickle)
-            for k in seeds[1:]:
-                try:
-                    _load_seed(name, k, spec, env, trust_pickle)
-                except PolicyMismatchError as exc:
-                    raise PolicyError(
-                        f"training seed {k} of {name!r} cannot serve N={spec.n_auvs}, "
-                        f"K={spec.n_nodes}, which seed {seeds[0]} serves: {exc}. Accepted: "
-                        "training seeds of one policy made for the same spaces"
-                    ) from exc
-            cells.append((name, spec))
         except PolicyMismatchError as exc:
             skipped.append(f"skipped {name} at N={spec.n_auvs}, K={spec.n_nodes}: {exc}")
+        except PolicyError as exc:
+            missing.setdefault(name, []).append((spec, exc))
+        else:
+            _load_other_seeds(name, seeds, spec, env, trust_pickle)
+            cells.append((name, spec))
         finally:
             env.close()
+    for name, lacking in missing.items():
+        if all(served != name for served, _ in cells):
+            raise lacking[0][1]  # it exists for no asked cell: a wrong name, a bad file
+        skipped.extend(
+            f"skipped {name} at N={spec.n_auvs}, K={spec.n_nodes}: {error}"
+            for spec, error in lacking
+        )
     return cells, skipped
+
+
+def _load_other_seeds(
+    name: str, seeds: list[int], spec: EnvSpec, env: Any, trust_pickle: bool
+) -> None:
+    """Every training seed after the first must exist and serve the cell the first serves."""
+    for k in seeds[1:]:
+        try:
+            _load_seed(name, k, spec, env, trust_pickle)
+        except PolicyMismatchError as exc:
+            raise PolicyError(
+                f"training seed {k} of {name!r} cannot serve N={spec.n_auvs}, "
+                f"K={spec.n_nodes}, which seed {seeds[0]} serves: {exc}. Accepted: "
+                "training seeds of one policy made for the same spaces"
+            ) from exc
 
 
 def _jobs(
