@@ -222,3 +222,58 @@ def test_link_budget_prints_the_channel_by_range_and_depth(capsys, tmp_path):
     assert r["packets_expected"] == pytest.approx(r["packets_sent"] * (1 - r["per"]))
     need = float(acoustics.uplink_energy_j(r["range_m"], AcousticsConfig()))
     assert r["uplink_cost_j"] == pytest.approx(need * r["usable_share"])
+
+
+# ------------------------------------------------------------------ every env
+REALISTIC = {
+    "channel": {
+        "features": ["depth", "propagation", "packets", "interference", "fading"],
+        "modulation": "bfsk",
+        "packet_bits": 2048,
+        "fading_model": "rician",
+        "shadowing_sigma_db": 3.0,
+    }
+}
+
+
+def test_the_channel_in_the_kinematic_batch_matches_single_envs(rng):
+    from test_vec_env import assert_batch_matches_independent_envs, docked_start
+
+    from iout_mj.envs import KinematicVecEnv
+
+    cfg = docked_start(Config.from_dict(REALISTIC))
+    venv = KinematicVecEnv(3, config=cfg)
+    assert_batch_matches_independent_envs(venv, "kinematic", cfg, rng, 80)
+
+
+@pytest.mark.slow
+def test_the_channel_in_the_physics_batch_matches_single_envs(rng):
+    from test_vec_env import assert_batch_matches_independent_envs, docked_start
+
+    from iout_mj.envs import PhysicsVecEnv
+
+    cfg = docked_start(Config.from_dict(REALISTIC))
+    venv = PhysicsVecEnv(2, config=cfg, nthread=1)
+    assert_batch_matches_independent_envs(venv, "mujoco", cfg, rng, 40)
+    venv.close()
+
+
+def test_the_channel_in_the_parallel_env_matches_the_gym_env():
+    import iout_mj
+
+    cfg = Config.from_dict(REALISTIC)
+    env = iout_mj.parallel_env(config=cfg)
+    single = gym.make("iout_mj/MultiAUV-v0", backend="kinematic", config=cfg)
+    env.reset(seed=4)
+    single.reset(seed=4)
+    received = 0
+    space = env.action_space("auv_0")
+    space.seed(0)
+    while env.agents:
+        actions = {a: space.sample() for a in env.agents}
+        _, rewards, *_ = env.step(actions)
+        flat, reward, *_, info = single.step(np.concatenate([actions["auv_0"], actions["auv_1"]]))
+        np.testing.assert_array_equal(env.state(), flat)
+        assert rewards["auv_0"] == reward
+        received += sum(info["channel"]["packets_received"])
+    assert received > 0
