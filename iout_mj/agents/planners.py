@@ -66,14 +66,22 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
     net, cfg = mission.network, mission.cfg
     k_reset, a_max = cfg.network.k_reset, cfg.network.aoi_max
     n = mission.n_auvs
-    req = acoustics.uplink_energy_j(pairwise_distance_m(positions_m, net.nodes_m), cfg.acoustics)
+    d = pairwise_distance_m(positions_m, net.nodes_m)
+    req = acoustics.uplink_energy_j(d, cfg.acoustics, cfg.channel)
     can = net.energy_j[None, :] >= UPLINK_MARGIN * req  # (N, K)
-    # candidate assignments: a node per AUV, distinct, affordable (or a sure miss: -1); each
-    # AUV's options are its best few by the greedy gain, so that at most ~MAX_CANDIDATES
+    # With the channel's interference, uplinks of one slot drown each other (a node's power
+    # gives SNR = gamma_req, 36 dB, at its AUV; a second node at a like range leaves SINR near
+    # 0 dB): one node per slot, named by every AUV (one broadcast), as one lane.
+    shared = cfg.channel.on("interference") and n > 1
+    lanes = 1 if shared else n
+    if shared:
+        can = np.asarray(can.any(axis=0, keepdims=True))
+    # candidate assignments: a node per lane, distinct, affordable (or a sure miss: -1); each
+    # lane's options are its best few by the greedy gain, so that at most ~MAX_CANDIDATES
     gain = net.aoi / (k_reset - net.service_count)
-    per_auv = max(n, int(MAX_CANDIDATES ** (1 / n)))
+    per_auv = max(lanes, int(MAX_CANDIDATES ** (1 / lanes)))
     options = []
-    for i in range(n):
+    for i in range(lanes):
         nodes = np.flatnonzero(can[i])
         best_first = nodes[np.argsort(-gain[nodes], kind="stable")][:per_auv]
         options.append([int(x) for x in best_first] or [-1])
@@ -81,18 +89,20 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
         c
         for c in itertools.product(*options)
         if len({x for x in c if x >= 0}) == sum(x >= 0 for x in c)
-    ] or [tuple(-1 for _ in range(n))]
-    picks = np.array(combos, dtype=np.int64)  # (C, N)
+    ] or [tuple(-1 for _ in range(lanes))]
+    picks = np.array(combos, dtype=np.int64)  # (C, lanes)
     aoi = np.repeat(net.aoi[None], len(picks), axis=0)
     count = np.repeat(net.service_count[None], len(picks), axis=0)
     rows = np.arange(len(picks))[:, None]
-    np.add.at(count, (rows.repeat(n, 1)[picks >= 0], picks[picks >= 0]), 1)
+    np.add.at(count, (rows.repeat(lanes, 1)[picks >= 0], picks[picks >= 0]), 1)
     reset = count >= k_reset
     aoi = np.where(reset, 1.0, np.minimum(aoi + 1, a_max))
     count[reset] = 0
     left = int(cfg.scenario.horizon_slots - mission.state.slot - 1)
-    value = aoi.sum(axis=1) + _greedy_tail_sum(aoi, count, n, max(left, 0), k_reset, a_max)
+    value = aoi.sum(axis=1) + _greedy_tail_sum(aoi, count, lanes, max(left, 0), k_reset, a_max)
     best = picks[int(np.argmin(value))]
+    if shared:
+        best = np.full(n, best[0])
     cheapest = np.argmin(req, axis=1)
     return np.where(best >= 0, best, cheapest).astype(np.int64)
 
