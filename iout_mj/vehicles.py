@@ -16,8 +16,10 @@ VESSELS/remus100.m; MSS below) as the cross-check. Its hull drag is its own, not
 MSS's drag is another estimate: Cd = 0.42 on the frontal area pi (0.19/2)^2 at rho 1026
 (remus100.m, "from Allen et al. (2000)"), i.e. 6.13 kg/m, 3.8 times P's X_uu.
 
-Not modelled (the MJCF says why): sway added mass (P: Y_vdot = -35.5 kg, 116 % of the mass)
-and the sway-yaw terms (Y_rdot = N_vdot = 1.93 kg m), and P's cross-flow drag (Y_vv).
+Both hulls carry their full planar added mass (surge, sway, yaw, the sway-yaw coupling, the
+Munk terms) through the iout.added_mass MuJoCo plugin (iout_mj/backends/mujoco/added_mass.c);
+the REMUS's plugin also applies P's cross-flow drag (Y_vv, Y_rr, N_vv) and the body's lift
+(the MJCF derives its share of P's Y_uv and N_uv).
 """
 
 from __future__ import annotations

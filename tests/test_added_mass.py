@@ -8,25 +8,32 @@ import mujoco
 import numpy as np
 import pytest
 
-from iout_mj.backends.mujoco import names, vehicle
+from iout_mj.backends.mujoco import added_mass, names, vehicle
 from iout_mj.backends.mujoco.physics import AUVPhysics, Stepper
 from iout_mj.config import Config
 from iout_mj.scenarios import make_config
 
 # (X_udot, Y_vdot, Y_rdot = N_vdot, N_rdot) as the MJCF files cite them.
 COEFFICIENTS = {
-    "paper-torpedo": (-7.3, -279.5, 34.3, -256.0),
+    "paper-torpedo": (-7.3, -221.3, 87.7, -256.0),
     "remus100": (-0.93, -35.5, 1.93, -4.88),
 }
 RIGID = {"paper-torpedo": (240.0, 181.4), "remus100": (30.48, 3.45)}
 """(mass, I_zz) without added mass: the torpedo's 240 kg cylinder, P Table 2.3 / Appendix B."""
+
 YAW = np.radians(30.0)
 
 
 def _hull(name: str) -> tuple[mujoco.MjModel, mujoco.MjData, list[int], list[int]]:
-    """One AUV of vehicle `name` at yaw 30 deg and rest; no actuators, no drag or lift (only
-    inertia and the added mass's own terms act)."""
-    model = vehicle.build_model(Config().with_vehicle(name))
+    """One AUV of vehicle `name` at yaw 30 deg and rest; no actuators, no drag or lift, MuJoCo's
+    nor the plugin's (only inertia and the added mass's own terms act)."""
+    spec = vehicle.build_scene(Config().with_vehicle(name))
+    for instance in spec.plugins:
+        instance.config = {k: instance.config[k] for k in ("body", "xudot", "yvdot", "yrdot")}
+    model = spec.compile()
+    added_mass.disable_fluid_added_mass(
+        model, [model.geom(names.auv_prefix(0) + g).id for g in ("hull_drag", "fin_drag")]
+    )
     model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_ACTUATION
     model.opt.density = 0.0
     data = mujoco.MjData(model)
@@ -66,11 +73,8 @@ def test_the_mjcf_coefficients_are_those_cited_and_mujoco_adds_no_mass_of_its_ow
         cfg = Config().with_vehicle(name)
         spec = vehicle.auv_spec(cfg)
         (instance,) = spec.plugins
-        assert {k: float(v) for k, v in instance.config.items() if k != "body"} == {
-            "xudot": x_udot,
-            "yvdot": y_vdot,
-            "yrdot": y_rdot,
-        }
+        config = instance.config
+        assert [float(config[k]) for k in ("xudot", "yvdot", "yrdot")] == [x_udot, y_vdot, y_rdot]
         model = vehicle.build_model(cfg.replace(scenario=make_config(2, 7).scenario))
         assert model.nplugin == 2  # one instance per AUV
         body = model.body(names.auv_prefix(1) + names.AUV_BODY).id
@@ -91,10 +95,11 @@ def test_step_force_from_rest_gives_the_analytic_acceleration(name, axis, magnit
     got = _body_accelerations(name, force, 10)[1:].mean(axis=0)
     exact = np.linalg.solve(_analytic_mass(name), force)
     np.testing.assert_allclose(got, exact, rtol=0.02, atol=0.01 * abs(exact).max())
-    x_udot, y_vdot, _, n_rdot = COEFFICIENTS[name]
-    mass, izz = RIGID[name]
-    own_inertia = [mass - x_udot, mass - y_vdot, izz - n_rdot][axis]  # the brief's F / (m + m_v)
-    assert got[axis] == pytest.approx(magnitude / own_inertia, rel=0.02)
+    # F / (m + m_v) and M / (I_zz + I_A) alone ignore the coupling: they are 0.7 % (REMUS) and
+    # 4.0 % (torpedo) off the exact solve in sway and in yaw; surge has no coupling
+    if axis == 0:
+        x_udot, *_ = COEFFICIENTS[name]
+        assert got[0] == pytest.approx(magnitude / (RIGID[name][0] - x_udot), rel=1e-6)
 
 
 @pytest.mark.parametrize("name", sorted(COEFFICIENTS))

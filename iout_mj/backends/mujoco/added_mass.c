@@ -19,13 +19,20 @@
    MuJoCo inertia. The plugin applies F_p = M_B nu_dot - (MuJoCo's own rigid-body terms) - F_o,
    so that MuJoCo's M_B nu_dot = F_o + F_p + ... follows the true dynamics. F_o is not known when
    passive forces are computed (actuators come later), so it is recovered after each substep
-   from the velocity change the substep made, F_o = M_B dqvel/dt - F_p, and used at the next
+   from the velocity change the substep made, F_o = M_B dqvel/dt - F_p - (joint-limit forces),
+   and used at the next
    substep: exact as dt -> 0 (one substep of lag after a force step), and F_p never feeds back
    on itself. The velocity terms use the current velocity. F_o lives in mjData's plugin state,
    so mj_getState/mj_setState (and mujoco.rollout) carry it.
 
+   Optionally it also applies hull forces MuJoCo's ellipsoid model lacks, in the same axes and
+   water-relative velocity: Y = yvv v|v| + yrr r|r| + yuv u v, N = nvv v|v| + nuv u v (cross-flow
+   drag and body lift, as in Prestero's equations); these are known when the plugin runs, so
+   they enter the acceleration solve at once, and F_o holds only the forces of others.
+
    Configured per instance (MJCF <extension><plugin><instance>): body, the hull body's name;
-   xudot, yvdot, yrdot: X_udot, Y_vdot (kg), Y_rdot = N_vdot (kg m).
+   xudot, yvdot, yrdot: X_udot, Y_vdot (kg), Y_rdot = N_vdot (kg m); optional (0 if absent):
+   yvv (kg/m), yrr (kg m/rad^2), nvv (kg), yuv (kg/m), nuv (kg).
    Requires: the body's joints x (slide along world x), y (slide along world y), yaw (hinge
    about world z), in this order; its centre of mass on the hinge axis and principal axes
    aligned with the body; no armature on these dofs. */
@@ -39,8 +46,20 @@
 
 #define PLUGIN_NAME "iout.added_mass"
 
-static const char* const ATTRIBUTES[] = {"body", "xudot", "yvdot", "yrdot"};
-enum { ATTR_BODY, ATTR_XUDOT, ATTR_YVDOT, ATTR_YRDOT, NATTRIBUTE };
+static const char* const ATTRIBUTES[] = {"body", "xudot", "yvdot", "yrdot", "yvv",
+                                         "yrr",  "nvv",   "yuv",   "nuv"};
+enum {
+  ATTR_BODY,
+  ATTR_XUDOT,
+  ATTR_YVDOT,
+  ATTR_YRDOT,
+  ATTR_YVV,  /* the optional hull terms: 0 when absent */
+  ATTR_YRR,
+  ATTR_NVV,
+  ATTR_YUV,
+  ATTR_NUV,
+  NATTRIBUTE
+};
 
 /* Plugin state per instance: F_o carried to the next substep, and this substep's record. */
 enum {
@@ -58,6 +77,7 @@ typedef struct {
   mjtNum inertia; /* I_b: rigid I_zz - N_rdot (the body's I_zz) */
   mjtNum sway;    /* D = X_udot - Y_vdot: sway added mass beyond the surge's */
   mjtNum couple;  /* c = -Y_rdot = -N_vdot */
+  mjtNum yvv, yrr, nvv, yuv, nuv; /* the hull's cross-flow drag and lift */
 } Hull;
 
 static int nstate(const mjModel* m, int instance) { return NSTATE; }
@@ -65,6 +85,10 @@ static int nstate(const mjModel* m, int instance) { return NSTATE; }
 static int read_attribute(const mjModel* m, int instance, int attr, mjtNum* out) {
   const char* text = mj_getPluginConfig(m, instance, ATTRIBUTES[attr]);
   char* end = NULL;
+  if ((!text || !*text) && attr >= ATTR_YVV) {
+    *out = 0;
+    return 0;
+  }
   if (!text || !*text) {
     mju_warning(PLUGIN_NAME ": config '%s' is missing (accepted: body, the hull body's name; "
                 "xudot, yvdot, yrdot in kg, kg, kg m)", ATTRIBUTES[attr]);
@@ -142,6 +166,11 @@ static int init(const mjModel* m, mjData* d, int instance) {
   }
   hull->sway = coef[ATTR_XUDOT] - coef[ATTR_YVDOT];
   hull->couple = -coef[ATTR_YRDOT];
+  hull->yvv = coef[ATTR_YVV];
+  hull->yrr = coef[ATTR_YRR];
+  hull->nvv = coef[ATTR_NVV];
+  hull->yuv = coef[ATTR_YUV];
+  hull->nuv = coef[ATTR_NUV];
   mjtNum det = (hull->mass + hull->sway) * hull->inertia - hull->couple * hull->couple;
   if (hull->mass + hull->sway <= 0 || det <= 0) {
     mju_warning(PLUGIN_NAME ": the planar mass matrix is not positive definite (mass %g kg, "
@@ -179,14 +208,18 @@ static void compute(const mjModel* m, mjData* d, int instance, int capability_bi
   mjtNum u = cy * vx + sy * vy, v = -sy * vx + cy * vy, r = qvel[h->dof[2]];
   mjtNum mb = h->mass, ib = h->inertia, dm = h->sway, c = h->couple;
 
+  /* the hull's own sway force and yaw moment (P's Y_vv, Y_rr, N_vv; body lift Y_uv, N_uv) */
+  mjtNum hv = h->yvv * v * fabs(v) + h->yrr * r * fabs(r) + h->yuv * u * v;
+  mjtNum hr = h->nvv * v * fabs(v) + h->nuv * u * v;
+
   /* sway and yaw: (M nu_dot)_{v,r} = g, solved for nu_dot; surge needs no solve */
-  mjtNum gv = s[S_FO + 1] - mb * r * u;
-  mjtNum gr = s[S_FO + 2] - dm * u * v - c * u * r;
+  mjtNum gv = s[S_FO + 1] + hv - mb * r * u;
+  mjtNum gr = s[S_FO + 2] + hr - dm * u * v - c * u * r;
   mjtNum det = (mb + dm) * ib - c * c;
   mjtNum vdot = (ib * gv - c * gr) / det;
   mjtNum rdot = ((mb + dm) * gr - c * gv) / det;
   mjtNum fu = dm * v * r + c * r * r;
-  mjtNum fv = mb * vdot - gv;
+  mjtNum fv = mb * vdot - gv + hv;
   mjtNum fr = ib * rdot - s[S_FO + 2];
 
   mjtNum fx = cy * fu - sy * fv, fy = sy * fu + cy * fv;
@@ -200,14 +233,20 @@ static void compute(const mjModel* m, mjData* d, int instance, int capability_bi
   s[S_YAW] = yaw;
 }
 
-/* After the substep: the hull's other forces, from the velocity change they made. */
+/* After the substep: the hull's other forces, from the velocity change they made, less the
+   joint limits' (a limit is a fence, not a force the hull's fluid mass would follow; lagged by a
+   substep, it would also feed back on itself). */
 static void advance(const mjModel* m, mjData* d, int instance) {
   const Hull* h = (const Hull*)d->plugin_data[instance];
   mjtNum* s = d->plugin_state + m->plugin_stateadr[instance];
   mjtNum rate = 1 / m->opt.timestep;
+  const mjtNum* limit = d->qfrc_constraint;  /* the arena's fence: it acts on M_B alone */
   mjtNum fx = h->mass * (d->qvel[h->dof[0]] - s[S_QVEL + 0]) * rate - s[S_FP + 0];
   mjtNum fy = h->mass * (d->qvel[h->dof[1]] - s[S_QVEL + 1]) * rate - s[S_FP + 1];
   mjtNum fr = h->inertia * (d->qvel[h->dof[2]] - s[S_QVEL + 2]) * rate - s[S_FP + 2];
+  fx -= limit[h->dof[0]];
+  fy -= limit[h->dof[1]];
+  fr -= limit[h->dof[2]];
   mjtNum cy = cos(s[S_YAW]), sy = sin(s[S_YAW]);
   s[S_FO + 0] = cy * fx + sy * fy;
   s[S_FO + 1] = -sy * fx + cy * fy;

@@ -77,32 +77,27 @@ class Hulls:
     qpos_yaw: IntArray
     """(H,) qpos address of yaw."""
     coefficients: FloatArray
-    """(H, 4): m_b (kg), I_b (kg m^2), D = X_udot - Y_vdot (kg), c = -Y_rdot (kg m)."""
+    """(H, 9): m_b (kg), I_b (kg m^2), D = X_udot - Y_vdot (kg), c = -Y_rdot (kg m), then the
+    hull terms yvv, yrr, nvv, yuv, nuv."""
 
 
 def hulls(model: mujoco.MjModel) -> Hulls:
     """The plugin instances of `model` (all of its plugins: the scene has no other)."""
-    values = bytes(model.plugin_attr).split(b"\0")
-    per_instance = 4  # body, xudot, yvdot, yrdot (added_mass.c's ATTRIBUTES)
+    attributes = bytes(model.plugin_attr)
     dofs, qpos_yaw, coefficients = [], [], []
     for i in range(model.nplugin):
-        start = int(model.plugin_attradr[i])
-        first = len(bytes(model.plugin_attr)[:start].split(b"\0")) - 1
-        body, x_udot, y_vdot, y_rdot = values[first : first + per_instance]
+        # body, xudot, yvdot, yrdot, yvv, yrr, nvv, yuv, nuv (added_mass.c's ATTRIBUTES)
+        body, *values = attributes[int(model.plugin_attradr[i]) :].split(b"\0")[:9]
+        x_udot, y_vdot, y_rdot, *hull = (float(v or 0) for v in values)
         b = model.body(body.decode())
         joints = range(int(b.jntadr[0]), int(b.jntadr[0]) + 3)
         dofs.append([int(model.jnt_dofadr[j]) for j in joints])
         qpos_yaw.append(int(model.jnt_qposadr[joints[2]]))
         coefficients.append(
-            [
-                float(b.mass[0]),
-                float(b.inertia[2]),
-                float(x_udot) - float(y_vdot),
-                -float(y_rdot),
-            ]
+            [float(b.mass[0]), float(b.inertia[2]), x_udot - y_vdot, -y_rdot, *hull]
         )
     return Hulls(
         np.array(dofs, dtype=np.int64).reshape(-1, 3),
         np.array(qpos_yaw, dtype=np.int64),
-        np.array(coefficients, dtype=np.float64).reshape(-1, 4),
+        np.array(coefficients, dtype=np.float64).reshape(-1, 9),
     )

@@ -94,13 +94,15 @@ def _kernels() -> dict[str, Any]:
         vx = qvel[w, dofs[h, 0]] - wind[w][0]
         vy = qvel[w, dofs[h, 1]] - wind[w][1]
         u, v, r = cy * vx + sy * vy, -sy * vx + cy * vy, qvel[w, dofs[h, 2]]
-        gv = state[w, h, 1] - mb * r * u
-        gr = state[w, h, 2] - dm * u * v - c * u * r
+        hv = coef[h, 4] * v * wp.abs(v) + coef[h, 5] * r * wp.abs(r) + coef[h, 7] * u * v
+        hr = coef[h, 6] * v * wp.abs(v) + coef[h, 8] * u * v
+        gv = state[w, h, 1] + hv - mb * r * u
+        gr = state[w, h, 2] + hr - dm * u * v - c * u * r
         det = (mb + dm) * ib - c * c
         vdot = (ib * gv - c * gr) / det
         rdot = ((mb + dm) * gr - c * gv) / det
         fu = dm * v * r + c * r * r
-        fv = mb * vdot - gv
+        fv = mb * vdot - gv + hv
         fr = ib * rdot - state[w, h, 2]
         fx, fy = cy * fu - sy * fv, sy * fu + cy * fv
         qfrc_applied[w, dofs[h, 0]] = fx
@@ -116,15 +118,20 @@ def _kernels() -> dict[str, Any]:
     @wp.kernel
     def added_mass_update(
         qvel: wp.array2d(dtype=float),  # type: ignore[valid-type]
+        qfrc_constraint: wp.array2d(dtype=float),  # type: ignore[valid-type]
         dofs: wp.array2d(dtype=int),  # type: ignore[valid-type]
         coef: wp.array2d(dtype=float),  # type: ignore[valid-type]
         rate: float,
         state: wp.array3d(dtype=float),  # type: ignore[valid-type]
     ) -> None:
         w, h = wp.tid()  # added_mass.c's advance()
-        fx = coef[h, 0] * (qvel[w, dofs[h, 0]] - state[w, h, 6]) * rate - state[w, h, 3]
-        fy = coef[h, 0] * (qvel[w, dofs[h, 1]] - state[w, h, 7]) * rate - state[w, h, 4]
-        fr = coef[h, 1] * (qvel[w, dofs[h, 2]] - state[w, h, 8]) * rate - state[w, h, 5]
+        x, y, z = dofs[h, 0], dofs[h, 1], dofs[h, 2]
+        fx = coef[h, 0] * (qvel[w, x] - state[w, h, 6]) * rate - state[w, h, 3]
+        fy = coef[h, 0] * (qvel[w, y] - state[w, h, 7]) * rate - state[w, h, 4]
+        fr = coef[h, 1] * (qvel[w, z] - state[w, h, 8]) * rate - state[w, h, 5]
+        fx -= qfrc_constraint[w, x]
+        fy -= qfrc_constraint[w, y]
+        fr -= qfrc_constraint[w, z]
         cy, sy = wp.cos(state[w, h, 9]), wp.sin(state[w, h, 9])
         state[w, h, 0] = cy * fx + sy * fy
         state[w, h, 1] = -sy * fx + cy * fy
@@ -213,7 +220,13 @@ class WarpStepper:
                 wp.launch(
                     k["added_mass_update"],
                     dim=(b, nhull),
-                    inputs=[self.data.qvel, self.hull_dofs, self.hull_coef, 1.0 / self.dt_s],
+                    inputs=[
+                        self.data.qvel,
+                        self.data.qfrc_constraint,
+                        self.hull_dofs,
+                        self.hull_coef,
+                        1.0 / self.dt_s,
+                    ],
                     outputs=[self.hull_state],
                 )
             wp.launch(
