@@ -162,3 +162,39 @@ def test_rollout_carries_the_plugin_state_across_calls_and_threads():
     np.testing.assert_array_equal(fly([50] * 4, 0), one)
     np.testing.assert_array_equal(fly([200], 2), one)
     assert np.abs(one[:, -20:]).max() > 0  # the plugin ran
+
+
+@pytest.mark.slow
+def test_warp_applies_the_same_added_mass_and_hull_forces_to_the_remus():
+    """MuJoCo Warp runs no C plugin: its kernels apply the same terms (two slots, N = 2, K = 7,
+    on Warp's CPU device; the torpedo's case is tests/test_warp.py)."""
+    pytest.importorskip("mujoco_warp")
+    from iout_mj.backends.mujoco.warp_stepper import WarpStepper
+    from iout_mj.envs.batch import MissionBatch
+
+    config = {"physics": {"current_jitter_mps": 0.2, "vehicle": "remus100"}}
+    c = MissionBatch(4, "mujoco", 2, 7, "random", config, seed=3)
+    w = MissionBatch(4, "mujoco", 2, 7, "random", config, seed=3)
+    w.stepper = WarpStepper(device="cpu")
+    c.restart()
+    w.restart()
+    rng = np.random.RandomState(2)
+    for tolerance_m in (2e-4, 5e-3):  # as tests/test_warp.py: float32 drifts in slot 2
+        a = np.stack(
+            [
+                np.concatenate([[rng.randint(11), rng.randint(7), rng.randint(7), 1] for _ in "ab"])
+                for _ in range(4)
+            ]
+        )
+        c.step(a)
+        w.step(a)
+        qc = np.stack([p.data.qpos for p in c.physics])
+        qw = np.stack([p.data.qpos for p in w.physics])
+        assert np.abs(qc - qw).max() < tolerance_m
+        # the hulls' other forces come back for the next slot (float32: within 0.1 N of the
+        # thrust's 10 N)
+        states = [np.stack([p.data.ptr.plugin_state for p in b.physics]) for b in (c, w)]
+        assert np.abs(states[1]).max() > 0
+        np.testing.assert_allclose(states[1][..., :3], states[0][..., :3], atol=0.1)
+    c.close()
+    w.close()
