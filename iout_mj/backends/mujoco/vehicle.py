@@ -15,12 +15,14 @@ The paper's torpedo (assets/auv.xml), with its sources:
   C_blunt is set here to give rho*C_d*S/2 = 9 N s^2/m^2 with the paper's numbers.
 - Sway and yaw: the same hull gives about 84 N s^2/m^2 of cross-flow drag (9x surge) and an
   angular drag; tail fins add Kutta lift, which keeps the hull directionally stable.
-- Added mass (MuJoCo computes but does not apply it): the ratios of the REMUS 100 model of
-  Prestero (2001, MIT thesis, Table 4.x: X_udot = -0.93 kg for m = 30.5 kg, Y_vdot = -35.5 kg,
-  N_rdot = -4.88 kg m^2 for I_zz = 3.45 kg m^2) scaled to this hull: surge 3.0 % (7.3 kg), yaw
-  141 % of I_zz (256 kg m^2 on top of 181 kg m^2). Surge added mass is in the body mass, yaw
-  added inertia in I_zz. Sway added mass (116 %, 279 kg) cannot be represented with world-axis
-  planar joints and is not modelled: it would slow sideslip build-up in turns.
+- Added mass: surge and yaw from the ratios of the REMUS 100 model of Prestero (2001, MIT
+  thesis, Appendix B: X_udot = -0.93 kg for m = 30.5 kg, N_rdot = -4.88 kg m^2 for
+  I_zz = 3.45 kg m^2) scaled to this hull: surge 3.0 % (7.3 kg, in the body mass), yaw 141 %
+  of I_zz (256 kg m^2 on top of 181 kg m^2, in I_zz). Sway (221.3 kg) and the sway-yaw coupling
+  (87.7 kg m) are the potential-flow added mass of the hull and fin ellipsoids; the
+  iout.added_mass plugin (added_mass.c) applies them and every Munk term in body axes, and
+  `build_model` turns MuJoCo's own ellipsoid added mass off (it would count the Munk terms
+  twice).
 - Surge propeller: speed servo F = k_v (ctrl - u) with the drag feedforward in ctrl (set by the
   task once per slot), saturated at rho*C_d*S/2 * V_max^2 so the vehicle reaches V_max and no
   more. Yaw: heading servo (kp, kv) on the yaw joint, saturated at 150 N m.
