@@ -10,6 +10,7 @@ loads only with `trust_pickle=True`.
 from __future__ import annotations
 
 import pickle
+import re
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,8 @@ from iout_mj.envs.gym_env import ENV_ID
 from iout_mj.errors import PolicyError, PolicyMismatchError
 
 LEGACY_FILES = ("model.zip", "vecnormalize.pkl")
+MAX_CANDIDATES = 256
+"""Candidate joint actions a rollout search may try per slot."""
 ACTION_MAPPING = ("heading_levels", "speed_levels", "dtheta_max_deg", "dv_max_mps", "v_max_mps")
 """Motion settings that decide what an action index means: a policy needs the same."""
 
@@ -135,9 +138,36 @@ def read_trained(name: str, env: Any, trust_pickle: bool = False) -> LoadedPolic
     return loaded
 
 
+SEARCH_SUFFIX = "+rollout"
+"""`<trained policy>+rollout[C]`: the policy improved by decision-time rollouts (`search`)."""
+DEFAULT_CANDIDATES = 16
+
+
+def split_search(name: str) -> tuple[str, int | None]:
+    """(the trained policy, candidates per slot) of `P+rollout[C]`; (name, None) otherwise."""
+    found = re.fullmatch(rf"(.+){re.escape(SEARCH_SUFFIX)}(\d*)", name)
+    if found is None:
+        return name, None
+    base, count = found.groups()
+    if count and not 1 <= int(count) <= MAX_CANDIDATES:
+        raise PolicyError(
+            f"policy {name!r}: accepted {base}{SEARCH_SUFFIX} ({DEFAULT_CANDIDATES} candidates "
+            f"per slot) or {base}{SEARCH_SUFFIX}<C> with C from 1 to {MAX_CANDIDATES}"
+        )
+    return base, int(count) if count else DEFAULT_CANDIDATES
+
+
 def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) -> Any:
     """A callable `policy(env, obs) -> action`: a baseline name or a trained policy (name or
-    folder), checked against `env`."""
+    folder), checked against `env`; `P+rollout[C]` is P improved by rollouts (`search`)."""
+    base, candidates = split_search(name)
+    if candidates is not None:
+        from iout_mj.agents.search import RolloutSearch  # the batch: imported when searched
+
+        try:
+            return RolloutSearch(read_trained(base, env, trust_pickle), candidates, seed)
+        except ValueError as exc:
+            raise PolicyError(f"policy {name!r}: {exc}") from exc
     if name in POLICIES:
         baseline = make_policy(name, seed)
 

@@ -73,6 +73,15 @@ class BatchStep:
     """Env index -> (its last observation, {"metrics": ..., and "error" if it diverged})."""
 
 
+def live_arrays(m: Mission) -> dict[str, np.ndarray]:
+    """A mission's own arrays that change as it steps (not copies), by name."""
+    out = {f"state.{f.name}": getattr(m.state, f.name) for f in dataclasses.fields(m.state)}
+    out.update({f"log.{f.name}": getattr(m.log, f.name) for f in dataclasses.fields(m.log)})
+    out.update({f"network.{name}": getattr(m.network, name) for name in NETWORK_DTYPES})
+    out["terms"] = m.term_values
+    return out
+
+
 class MissionBatch:
     """A batched Mission and the vehicles it moves.
 
@@ -226,13 +235,7 @@ class MissionBatch:
         }
 
     def _live_arrays(self) -> dict[str, np.ndarray]:
-        """The mission's own arrays that change as it steps (not copies), by name."""
-        m = self.mission
-        out = {f"state.{f.name}": getattr(m.state, f.name) for f in dataclasses.fields(m.state)}
-        out.update({f"log.{f.name}": getattr(m.log, f.name) for f in dataclasses.fields(m.log)})
-        out.update({f"network.{name}": getattr(m.network, name) for name in NETWORK_DTYPES})
-        out["terms"] = m.term_values
-        return out
+        return live_arrays(self.mission)
 
     def close(self) -> None:
         if self.stepper is not None:

@@ -29,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from iout_mj.agents.policies import GENERAL, LEGACY_FILES, load_policy
+from iout_mj.agents.policies import GENERAL, LEGACY_FILES, load_policy, split_search
 from iout_mj.agents.policy_format import MANIFEST
 from iout_mj.agents.registry import POLICIES
 from iout_mj.agents.rollout import run_episode
@@ -198,6 +198,9 @@ def seed_variant(name: str, training_seed: int, n_auvs: int) -> str:
     `runs/gen-seed0/best` -> `runs/gen-seed<k>/best`)."""
     if training_seed == 0:
         return name
+    base, candidates = split_search(name)
+    if candidates is not None:  # P+rollout: training seed k of P, searched the same way
+        return seed_variant(base, training_seed, n_auvs) + name[len(base) :]
     suffix = f"-seed{training_seed}"
     if name == GENERAL:
         return f"{GENERAL}-n{n_auvs}{suffix}"

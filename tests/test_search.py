@@ -1,0 +1,83 @@
+"""Decision-time rollout search (`agents.search`): its model is the env's own on the kinematic
+backend, it never does worse than the policy it improves there, and it is reachable by name."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from iout_mj.agents.policies import load_policy, read_trained, split_search
+from iout_mj.agents.rollout import run_episode
+from iout_mj.agents.search import UNDOCKED_PENALTY, RolloutSearch, _copy_state
+from iout_mj.envs.batch import MissionBatch
+from iout_mj.errors import PolicyError
+
+
+def _env(n_auvs: int = 1, n_nodes: int = 5) -> gym.Env:
+    return gym.make(
+        "iout_mj/MultiAUV-v0", backend="kinematic", n_auvs=n_auvs, n_nodes=n_nodes, layout="random"
+    )
+
+
+def _score(metrics: dict) -> float:
+    undocked = len(metrics["docked"]) - sum(metrics["docked"])
+    return metrics["mean_aoi_horizon"] + UNDOCKED_PENALTY * undocked
+
+
+def test_a_copied_mission_flown_by_the_policy_ends_as_the_env_does():
+    env = _env()
+    base = read_trained("ppo-general", env)
+    env.reset(seed=3)
+    for _ in range(4):  # mid-mission
+        env.step(base(env, None))
+    batch = MissionBatch(2, "kinematic", config=env.unwrapped.env_spec.config, observation="tokens")
+    _copy_state(env.unwrapped.mission, batch)
+    k_max = base.manifest["k_max"]
+    done = False
+    while not done:
+        _, _, terminated, truncated, info = env.step(base(env, None))
+        batch.move(base.act(batch.mission.observe_tokens(k_max)))
+        done = terminated or truncated
+    assert batch.mission.state.terminated.all() or batch.mission.state.truncated.all()
+    keys = ("mean_aoi_horizon", "mean_aoi", "jain", "delivered_bits", "mission_slots", "docked")
+    for e in range(2):
+        copied = batch.mission.metrics(e)
+        assert {k: copied[k] for k in keys} == {k: info["metrics"][k] for k in keys}
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_search_never_ends_worse_than_its_policy_on_the_exact_model(seed):
+    env = _env(n_auvs=2, n_nodes=5)
+    base = read_trained("ppo-general", env)
+    plain = run_episode(env, base, seed=seed)
+    searched = run_episode(env, RolloutSearch(base, candidates=4, seed=seed), seed=seed)
+    assert _score(searched) <= _score(plain) + 1e-9
+
+
+def test_one_candidate_is_the_policy_itself():
+    env = _env()
+    base = read_trained("ppo-general", env)
+    plain = run_episode(env, base, seed=2)
+    assert run_episode(env, RolloutSearch(base, candidates=1), seed=2) == plain
+
+
+def test_the_search_is_named_after_the_policy_it_improves():
+    assert split_search("ppo-general+rollout") == ("ppo-general", 16)
+    assert split_search("runs/x-seed0/best+rollout8") == ("runs/x-seed0/best", 8)
+    assert split_search("ppo-general") == ("ppo-general", None)
+    env = _env()
+    assert isinstance(load_policy("ppo-general+rollout4", env), RolloutSearch)
+    with pytest.raises(PolicyError, match="C from 1 to 256"):
+        split_search("ppo-general+rollout0")
+    with pytest.raises(PolicyError, match="general"):
+        load_policy("ppo-n1-k7+rollout", gym.make("iout_mj/MultiAUV-v0", n_auvs=1))
+
+
+def test_candidates_are_distinct_and_start_with_the_policy_action():
+    env = _env(n_auvs=2, n_nodes=7)
+    base = read_trained("ppo-general", env)
+    env.reset(seed=0)
+    search = RolloutSearch(base, candidates=8, seed=0)
+    tokens = env.unwrapped.mission.observe_tokens(search.k_max)
+    actions = search._candidate_actions(tokens)
+    assert len({tuple(a) for a in actions}) == len(actions) > 1
+    np.testing.assert_array_equal(actions[0], base.act(tokens[None])[0])
