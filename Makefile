@@ -3,9 +3,10 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-# The compiled mission rules (iout_mj/_native*.so): rebuilt when a C source changes.
+# The compiled mission rules (iout_mj/_native*.so) and the added-mass MuJoCo plugin
+# (iout_mj/backends/mujoco/_added_mass*.so): rebuilt when a C source changes.
 NATIVE := $(VENV)/.native
-NATIVE_SOURCES := iout_mj/native.h iout_mj/native.c $(wildcard iout_mj/*/*.c)
+NATIVE_SOURCES := iout_mj/native.h iout_mj/native.c $(wildcard iout_mj/*/*.c iout_mj/*/*/*.c) setup.py
 # The CPU build of torch that lies on these machines' disk; an unpinned torch pulls CUDA (GBs).
 TORCH := torch==2.13.0
 

@@ -271,13 +271,18 @@ def cmd_train(args: argparse.Namespace) -> int:
 def train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
     """The training config with the command line's overrides applied, then checked as a whole
     (N, K and the nodes resolve as for any env: a contradiction names both)."""
-    from iout_mj.scenarios import read_nodes
+    from iout_mj.scenarios import read_layout
 
     changes: dict[str, Any] = {}
     env = load_config(args.config) if args.config is not None else cfg.env
-    if args.nodes_file is not None:
-        scenario = dataclasses.replace(env.scenario, nodes_m=read_nodes(args.nodes_file))
-        env = env.replace(scenario=scenario)
+    layout = read_layout(args.nodes_file)
+    if layout is not None:  # the nodes, and their seabed depths where the file gives them
+        nodes_m, depths_m = layout
+        scenario = dataclasses.replace(env.scenario, nodes_m=nodes_m)
+        channel = dataclasses.replace(
+            env.channel, node_depths_m=depths_m or env.channel.node_depths_m
+        )
+        env = env.replace(scenario=scenario, channel=channel)
         changes["n_nodes"] = None
     for flag, field in (("seed", "seed"), ("layout", "layout"), ("n_auvs", "n_auvs")):
         if getattr(args, flag) is not None:

@@ -7,6 +7,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import ROOT
 
 from iout_mj.config import AcousticsConfig, ChannelConfig, Config
 from iout_mj.scenarios import resolve
@@ -109,6 +110,15 @@ def test_a_nodes_file_with_depths(tmp_path):
     flat = tmp_path / "flat.csv"
     flat.write_text("100, 100\n900, 100\n")
     assert resolve(nodes=flat).config.channel.node_depths_m == ()
+    # training from the file keeps its depths (train --nodes-file)
+    from iout_mj.cli import build_parser
+    from iout_mj.commands import train_overrides
+    from iout_mj.training import TrainConfig
+
+    args = build_parser().parse_args(["train", "x.yaml", "--nodes-file", str(path)])
+    cfg = train_overrides(TrainConfig.load(ROOT / "training/configs/smoke.yaml"), args)
+    assert cfg.env.channel.node_depths_m == (80.0, 120.0, 90.0)
+    assert cfg.env.scenario.nodes_m[2] == (500.0, 800.0)
 
 
 @pytest.mark.parametrize(

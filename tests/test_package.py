@@ -33,6 +33,8 @@ def test_wheel_carries_the_assets_and_a_working_compiled_library(tmp_path):
         names = set(z.namelist())
         assert {"iout_mj/assets/auv.xml", "iout_mj/assets/arena.xml"} <= names
         (library,) = [n for n in names if n.startswith("iout_mj/_native") and n.endswith(".so")]
+        plugin = "iout_mj/backends/mujoco/_added_mass"
+        assert [n for n in names if n.startswith(plugin) and n.endswith(".so")]
         z.extract(library, tmp_path)
     built = ctypes.CDLL(str(tmp_path / library))
     fields, sizes = native.read_layout(built)  # the wheel's own compiled declarations

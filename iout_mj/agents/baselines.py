@@ -191,7 +191,7 @@ class Planner:
         speed = np.where(near, 0.8, approach_speed(dist, mission.cfg.scenario.slot_s))
         h, s = steer(mission, targets, speed)
         h = np.where(near, mission.cfg.motion.heading_levels - 1, h)  # circle at the node
-        req = acoustics.uplink_energy_j(d, mission.cfg.acoustics)
+        req = acoustics.uplink_energy_j(d, mission.cfg.acoustics, mission.cfg.channel)
         can = net.energy_j[None, :] >= req
         data = np.empty(n, dtype=np.int64)
         chosen: set[int] = set()
