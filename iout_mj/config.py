@@ -470,6 +470,10 @@ class ScenarioConfig:
     start_heading_rad: float = 0.0
     dock_center_m: Point = (830.0, 830.0)
     dock_radius_m: float = 70.0
+    dock_max_speed_mps: float | None = None
+    """An AUV docks when it ends a slot inside the dock zone at or below this speed through
+    the water; null: on entering the zone at any speed (the paper's rule), so a tour through
+    the zone ends that AUV's mission."""
     slot_s: float = 25.0
     horizon_slots: int = 55
     start_jitter_m: float = 10.0
@@ -513,6 +517,8 @@ class ScenarioConfig:
         dx, dy = self.dock_center_m
         r = self.dock_radius_m
         require(r > 0, "dock_radius_m", r, "a radius > 0 m")
+        v = self.dock_max_speed_mps
+        require(v is None or v > 0, "dock_max_speed_mps", v, "a speed > 0 m/s, or null")
         require(
             r <= dx <= ax - r and r <= dy <= ay - r,
             "dock_center_m",

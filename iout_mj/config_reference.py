@@ -11,6 +11,7 @@ import ast
 import dataclasses
 import inspect
 import itertools
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -124,7 +125,8 @@ def _weights_docs(cls: type) -> dict[str, str]:
 
 
 def _plain(value: Any) -> str:
-    return repr(schema.to_plain(value)).replace("'", '"')
+    """A default as YAML reads it back (JSON is YAML): null, true, [1.0, 2.0], "flat"."""
+    return json.dumps(schema.to_plain(value))
 
 
 def dump_yaml(cfg: Config | None = None) -> str:

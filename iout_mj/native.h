@@ -24,6 +24,7 @@
 #define IOUT_PARAMS(X)                                                                          \
     X(double, slot_s) X(int64_t, horizon_slots) X(double, area_x_m) X(double, area_y_m)         \
     X(double, inv_diag_per_m) X(double, dock_x_m) X(double, dock_y_m) X(double, dock_radius_m)  \
+    X(double, dock_max_speed_mps)                                                               \
     X(double, v_max_mps) X(double, hotel_j) X(double, drag_power_w_at_1mps)                     \
     X(int64_t, k_reset) X(double, aoi_max) X(double, deadline_speed_mps)                        \
     X(double, fairness_lambda) X(int64_t, fairness_min_deliveries) X(double, stall_distance_m)  \

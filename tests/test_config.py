@@ -75,6 +75,7 @@ def test_presets_and_random_layouts():
         ({"scenario": {"nodes_m": [[100, 100]]}}, r"nodes_m.*2 to 30 nodes"),
         ({"scenario": {"dock_center_m": [990, 500]}}, r"dock_center_m.*inside area_m"),
         ({"scenario": {"n_auvs": 5}}, r"n_auvs=5.*1 to 4"),
+        ({"scenario": {"dock_max_speed_mps": 0}}, r"dock_max_speed_mps=0.0.*> 0 m/s, or null"),
         ({"scenario": {"nodes_m": [[100, 100], [2000, 5]]}}, r"nodes_m\[1\].*inside area_m"),
         ({"acoustics": {"noise_model": "loud"}}, r"noise_model.*'flat' or 'wenz'"),
         ({"scenario": {"area_m": [1000]}}, r"area_m.*list of 2 values"),

@@ -101,6 +101,14 @@ def test_docking_bonuses_and_early_end():
     assert t["undocked_at_end"] == 0.0
 
 
+@pytest.mark.parametrize(("limit_mps", "docks"), [(None, True), (1.5, True), (0.5, False)])
+def test_an_auv_docks_in_the_zone_at_or_below_the_dock_speed(limit_mps, docks):
+    m = mission_at([(745.0, 830.0)], dock_max_speed_mps=limit_mps)
+    FakeBackend(m).step(action((0, 0)), [[770.0, 830.0]])  # into the zone at 1 m/s
+    assert m.state.speeds_mps[0] == pytest.approx(1.0)
+    assert bool(m.state.docked[0]) is docks and bool(m.state.terminated) is docks
+
+
 def test_fairness_once_more_than_three_deliveries():
     m = mission_at([(100.0, 500.0)])
     m.network.deliveries[:] = [4, 0, 0, 0, 0, 0, 0]

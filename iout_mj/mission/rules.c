@@ -215,7 +215,8 @@ void iout_end_env(const Mission *m, int64_t e, const double *positions_m,
     for (int64_t i = 0; i < n; i++) {
         int64_t a = a0 + i;
         dock_dist_m[i] = hypot(positions_m[2 * i] - p->dock_x_m, positions_m[2 * i + 1] - p->dock_y_m);
-        s->docked[a] = s->docked[a] || dock_dist_m[i] <= p->dock_radius_m;
+        s->docked[a] = s->docked[a] || (dock_dist_m[i] <= p->dock_radius_m &&
+                                        speeds_mps[i] <= p->dock_max_speed_mps);
         all_docked = all_docked && s->docked[a];
         battery_empty = battery_empty || s->battery_j[a] <= 0.0;
     }

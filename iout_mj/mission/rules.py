@@ -48,6 +48,7 @@ def params(cfg: Config) -> np.ndarray:
         "dock_x_m": sc.dock_center_m[0],
         "dock_y_m": sc.dock_center_m[1],
         "dock_radius_m": sc.dock_radius_m,
+        "dock_max_speed_mps": np.inf if sc.dock_max_speed_mps is None else sc.dock_max_speed_mps,
         "v_max_mps": m.v_max_mps,
         "hotel_j": float(propulsion.hotel_energy_j(sc.slot_s, m)),
         "drag_power_w_at_1mps": float(propulsion.drag_power_w(1.0, m)),
