@@ -260,17 +260,6 @@ def test_the_parser_imports_no_heavy_layer_and_shows_the_registries_names():
     assert tuple(POLICIES) == cli.BASELINES
 
 
-@pytest.mark.parametrize("command", [None, "evaluate", "mission", "train"])
-def test_help_is_quick(command):
-    argv = [sys.executable, "-m", "iout_mj.cli", *([command] if command else []), "--help"]
-    times = []
-    for _ in range(3):  # the best of three: other processes share the machine
-        start = time.perf_counter()
-        subprocess.run(argv, capture_output=True, check=True)
-        times.append(time.perf_counter() - start)
-    assert min(times) < 0.6  # about 0.2 s on 2 idle cores; 1 s when it imported MuJoCo
-
-
 def command_raising(monkeypatch, exc):
     from iout_mj import cli, commands
 
