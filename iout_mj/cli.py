@@ -1,8 +1,9 @@
 """`iout-mj`: the paper's missions on MuJoCo physics, their evaluation and training.
 
 Commands: link-budget, validate-energy, mission, render, evaluate, compare, figures, train,
-export, sweep, bench, config, list. `--out` is always a folder; `--config` always an env config
-(nodes, N, current, noise, reward, physics: `iout-mj config --dump` lists every key).
+train-marl, export, sweep, bench, config, list. `--out` is always a folder; `--config` always
+an env config (nodes, N, current, noise, reward, physics: `iout-mj config --dump` lists every
+key).
 
 Exit codes: 0 done; 1 a bug (the traceback is shown); 2 bad input (the message says what is
 accepted); 3 the physics diverged (the mission's metrics are written, marked invalid); 130
@@ -308,6 +309,27 @@ def build_parser() -> argparse.ArgumentParser:
         help="total PPO steps instead of the config's (its phases scaled to them)",
     )
     p.set_defaults(func="cmd_train")
+
+    p = sub.add_parser(
+        "train-marl",
+        help="MAPPO or IPPO on the PettingZoo env (TorchRL; pip install -e '.[mappo]')",
+        **fmt,
+    )
+    p.add_argument("marl_config", help="the config, training/configs/mappo-*.yaml or ippo-*.yaml")
+    p.add_argument("--out", help="run folder (default: runs/<name>, runs/<name>-seed<S>)")
+    p.add_argument("--resume", action="store_true", help="continue the run in <out>")
+    p.add_argument(
+        "--seed",
+        type=int_at_least(0),
+        help="training seed instead of the config's (default run folder runs/<name>-seed<S>)",
+    )
+    p.add_argument(
+        "--steps",
+        type=int_at_least(1),
+        help="total agent steps instead of the config's (its phases scaled to them)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no evaluation rows while training")
+    p.set_defaults(func="cmd_train_marl")
 
     p = sub.add_parser(
         "compare",

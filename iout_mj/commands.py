@@ -268,6 +268,29 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_marl(args: argparse.Namespace) -> int:
+    """MAPPO or IPPO (`training.marl`): the run folder gets checkpoint/, policy/, curve.json."""
+    from iout_mj.training.marl import MarlConfig, train_marl  # heavy: TorchRL
+
+    cfg = MarlConfig.load(args.marl_config)
+    changes: dict[str, Any] = {}
+    name = cfg.name
+    if args.seed is not None:
+        name, changes["seed"] = f"{cfg.name}-seed{args.seed}", args.seed
+    if args.steps is not None:
+        total = sum(p.agent_steps for p in cfg.phases)
+        changes["phases"] = tuple(
+            dataclasses.replace(p, agent_steps=max(1, round(p.agent_steps * args.steps / total)))
+            for p in cfg.phases
+        )
+    cfg = dataclasses.replace(cfg, **changes)
+    out = writable_dir(Path(args.out or f"runs/{name}"))
+    with output_lock(out, "train-marl"):
+        summary = train_marl(cfg, out, resume=args.resume, progress=not args.quiet)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
 def train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
     """The training config with the command line's overrides applied, then checked as a whole
     (N, K and the nodes resolve as for any env: a contradiction names both)."""

@@ -29,6 +29,7 @@ from iout_mj.agents.policy_format import (
 )
 from iout_mj.agents.registry import POLICIES, make_policy
 from iout_mj.agents.shipped import SHIPPED_DIR, shipped_policies
+from iout_mj.agents.team_policy import ACTION_DIMS, TeamPolicy, check_fit, team_observation_size
 from iout_mj.config import Config
 from iout_mj.envs.gym_env import ENV_ID
 from iout_mj.errors import PolicyError, PolicyMismatchError
@@ -60,7 +61,11 @@ def check_fits(manifest: dict[str, Any], folder: Path, env: Any) -> None:
     mission = env.unwrapped.mission
     obs_size, nvec = env.observation_space.shape[0], [int(v) for v in env.action_space.nvec]
     want_n, want_k = manifest.get("n_auvs"), manifest.get("n_nodes")
-    if manifest.get("policy") == "tokens":
+    if "team" in manifest:
+        team = manifest["team"]
+        check_team_sizes(team, manifest, folder)
+        check_fit(mission.n_auvs, mission.n_nodes, team["n_max"], team["k_max"])
+    elif manifest.get("policy") == "tokens":
         k_max = manifest.get("k_max", 0)
         if want_n != mission.n_auvs or mission.n_nodes > k_max:
             raise PolicyMismatchError(
@@ -85,6 +90,32 @@ def check_fits(manifest: dict[str, Any], folder: Path, env: Any) -> None:
                 f"policy {folder} was trained with motion.{key}={trained[key]}; this env has "
                 f"{getattr(motion, key)}: its action indices would mean other manoeuvres"
             )
+
+
+def check_team_sizes(team: Any, manifest: dict[str, Any], folder: Path) -> None:
+    """A team policy's manifest: its padded sizes and the network's observation and actions
+    agree (`team_policy`)."""
+    ok = isinstance(team, dict) and all(
+        isinstance(team.get(key), int) and not isinstance(team.get(key), bool) and team[key] >= 1
+        for key in ("n_max", "k_max")
+    )
+    if not ok:
+        raise PolicyError(
+            f"policy {folder}: team is {team!r:.80}; accepted {{algorithm, n_max, k_max}} with "
+            "n_max and k_max integers >= 1"
+        )
+    size = team_observation_size(team["n_max"], team["k_max"])
+    nvec = manifest.get("action_nvec", [])
+    if (
+        manifest.get("observation_size") != size
+        or len(nvec) != ACTION_DIMS
+        or nvec[2:] != [team["k_max"]] * 2
+    ):
+        raise PolicyError(
+            f"policy {folder}: a team policy for n_max={team['n_max']}, k_max={team['k_max']} "
+            f"observes {size} entries and chooses [heading, speed, k_max, k_max]; its manifest "
+            f"says observation {manifest.get('observation_size')}, actions {nvec}"
+        )
 
 
 def _legacy(folder: Path, env: Any) -> LoadedPolicy:
@@ -164,8 +195,14 @@ def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) 
     if candidates is not None:
         from iout_mj.agents.search import RolloutSearch  # the batch: imported when searched
 
+        loaded = read_trained(base, env, trust_pickle)
+        if "team" in loaded.manifest:
+            raise PolicyError(
+                f"policy {name!r}: the rollout search improves a joint policy; {base} is a team "
+                "policy (one actor per AUV): accepted it without +rollout"
+            )
         try:
-            return RolloutSearch(read_trained(base, env, trust_pickle), candidates, seed)
+            return RolloutSearch(loaded, candidates, seed)
         except ValueError as exc:
             raise PolicyError(f"policy {name!r}: {exc}") from exc
     if name in POLICIES:
@@ -176,7 +213,8 @@ def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) 
 
         act.reset = baseline.reset  # type: ignore[attr-defined]
         return act
-    return read_trained(name, env, trust_pickle)
+    loaded = read_trained(name, env, trust_pickle)
+    return TeamPolicy(loaded) if "team" in loaded.manifest else loaded
 
 
 def convert_legacy(src: Path, dst: Path, env_config: Config, extra: dict[str, Any]) -> None:

@@ -1,0 +1,200 @@
+"""MAPPO and IPPO through TorchRL (`training.marl`) and the team policy they export."""
+
+import json
+from dataclasses import replace
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from conftest import ROOT
+from pettingzoo.test import parallel_api_test
+
+import iout_mj
+from iout_mj.agents.policies import load_policy
+from iout_mj.agents.rollout import run_episode
+from iout_mj.agents.team_policy import (
+    TeamPolicy,
+    node_present_slice,
+    padded_observations,
+    padded_state,
+)
+from iout_mj.cli import main
+from iout_mj.envs import ENV_ID
+from iout_mj.envs.parallel_env import agent_observations
+from iout_mj.errors import CheckpointError, PolicyError, PolicyMismatchError
+from iout_mj.schema import ConfigError
+from iout_mj.training.marl import (
+    MarlConfig,
+    MarlPhase,
+    TeamActions,
+    TeamEnv,
+    make_learner,
+    restore,
+    team_policy,
+    train_marl,
+)
+
+
+def tiny(algorithm: str = "mappo", agent_steps: int = 256) -> MarlConfig:
+    return MarlConfig(
+        name="tiny",
+        algorithm=algorithm,
+        node_range=(3, 6),
+        phases=(MarlPhase("kinematic", agent_steps),),
+        steps_per_batch=64,
+        minibatch_size=32,
+        epochs=1,
+        hidden=(16,),
+        eval_every_batches=1,
+        eval_episodes=2,
+    )
+
+
+def unpadded(obs: np.ndarray, n: int, k: int, n_max: int, k_max: int) -> np.ndarray:
+    """A padded observation (`team_policy`) without its padding and present flags."""
+    nodes = obs[7 : 7 + 4 * k_max].reshape(4, k_max)[:3, :k].ravel()
+    at = 7 + 4 * k_max
+    others = obs[at : at + 4 * (n_max - 1)].reshape(n_max - 1, 4)[: n - 1]
+    at += 4 * (n_max - 1)
+    tail = [others[:, :2].ravel(), others[:, 2], obs[at : at + 1], obs[at + 1 : at + 1 + n]]
+    return np.concatenate([obs[:7], nodes, *tail])
+
+
+def test_padded_observations_and_state_hold_the_envs_own(rng):
+    env = iout_mj.parallel_env(n_auvs=3, n_nodes=5, layout="random")
+    env.reset(seed=3)
+    for _ in range(4):
+        env.step({a: env.action_space(a).sample() for a in env.agents})
+    m = env.mission
+    padded = padded_observations(m, 4, 8)
+    own = agent_observations(m)
+    for i in range(3):
+        np.testing.assert_array_equal(unpadded(padded[i], 3, 5, 4, 8), own[i])
+    assert padded[:, node_present_slice(8)].tolist() == [[1] * 5 + [0] * 3] * 3
+    state = padded_state(m, 4, 8)
+    g = {k: v.astype(np.float32) for k, v in m.observation().items()}  # state()'s groups
+    auvs = state[: 4 * 8].reshape(4, 8)
+    np.testing.assert_array_equal(auvs[:3, :2].ravel(), g["auv_position"])
+    assert auvs[:, 7].tolist() == [1, 1, 1, 0] and not auvs[3].any()
+    nodes = state[4 * 8 : -1].reshape(3 + 4, 8)
+    np.testing.assert_array_equal(nodes[0, :5], g["aoi"])
+    np.testing.assert_array_equal(nodes[3:6, :5].ravel(), g["distance"])
+    assert nodes[2].tolist() == [1] * 5 + [0] * 3 and state[-1] == g["time_remaining"][0]
+    with pytest.raises(PolicyMismatchError, match=r"accepted N <= 2 and K <= 8"):
+        padded_observations(m, 2, 8)
+
+
+def test_team_env_passes_the_pettingzoo_api_and_draws_k_per_episode():
+    # the API test samples unmasked actions: with one K every node index is present
+    parallel_api_test(TeamEnv(replace(tiny(), node_range=(5, 5)), "kinematic", 0), num_cycles=60)
+    env = TeamEnv(tiny(), "kinematic", seed=0)
+    ks = set()
+    for seed in range(12):
+        env.reset(seed=seed)
+        ks.add(env.current.mission.n_nodes)
+    assert ks <= {3, 4, 5, 6} and len(ks) >= 3
+    env.reset(seed=0)
+    k = env.current.mission.n_nodes
+    with pytest.raises(ValueError, match=rf"accepted node indices from 0 to {k - 1}"):
+        env.step({a: np.array([5, 3, 0, k]) for a in env.agents})
+
+
+def test_the_action_mask_keeps_nodes_to_those_present():
+    logits = torch.zeros(500, 2, 11 + 7 + 6 + 6)
+    present = torch.tensor([1.0, 1.0, 1.0, 0.0, 0.0, 0.0]).expand(500, 2, 6)
+    dist = TeamActions(logits, present, (11, 7, 6, 6))
+    actions = dist.sample()
+    assert actions.shape == (500, 2, 4)
+    assert actions[..., 2:].max() == 2 and actions[..., 0].max() == 10
+    assert torch.isfinite(dist.log_prob(actions)).all()
+    np.testing.assert_allclose(dist.entropy(), np.log(11 * 7 * 3 * 3), rtol=1e-5)
+
+
+@pytest.mark.parametrize("algorithm", ["mappo", "ippo"])
+def test_training_saves_resumes_and_the_policy_flies_n_2_to_4(tmp_path, algorithm):
+    cfg = tiny(algorithm)
+    summary = train_marl(cfg, tmp_path, progress=False)
+    assert summary["agent_steps"] == 256 and summary["agent_steps_per_s"] > 0
+    curve = json.loads((tmp_path / "curve.json").read_text())
+    assert [r["agent_steps"] for r in curve["curve"]] == [128, 256]
+    assert curve["greedy"]["kinematic"]["docked_rate"] == 1.0
+
+    env = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=6, layout="random")
+    env.reset(seed=0)
+    obs = padded_observations(env.unwrapped.mission, 4, 6)
+    learner = make_learner(cfg)
+    assert restore(learner, tmp_path / "checkpoint")["agent_steps"] == 256
+    assert learner.optim.state_dict()["state"]  # Adam's moments came back too
+    exported = load_policy(str(tmp_path / "policy"), env)
+    for mine, theirs in zip(team_policy(learner).logits(obs), exported.logits(obs), strict=True):
+        torch.testing.assert_close(mine, theirs)
+
+    with pytest.raises(CheckpointError, match="already holds a run"):
+        train_marl(cfg, tmp_path, progress=False)
+    with pytest.raises(CheckpointError, match="other settings"):
+        train_marl(replace(cfg, hidden=(8,)), tmp_path, resume=True, progress=False)
+    longer = replace(cfg, phases=(MarlPhase("kinematic", 512),))
+    resumed = train_marl(longer, tmp_path, resume=True, progress=False)
+    assert resumed["agent_steps"] == 512
+    curve = json.loads((tmp_path / "curve.json").read_text())
+    assert [r["agent_steps"] for r in curve["curve"]] == [128, 256, 384, 512]
+
+    for n, k in ((2, 6), (3, 4), (4, 5)):
+        env = gym.make(ENV_ID, backend="kinematic", n_auvs=n, n_nodes=k, layout="random")
+        policy = load_policy(str(tmp_path / "policy"), env)
+        assert isinstance(policy, TeamPolicy)
+        metrics = run_episode(env, policy, seed=1)
+        assert np.isfinite(metrics["mean_aoi_horizon"])
+    big = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=7)
+    with pytest.raises(PolicyMismatchError, match="K <= 6"):
+        load_policy(str(tmp_path / "policy"), big)
+    with pytest.raises(PolicyError, match="team policy"):
+        load_policy(f"{tmp_path / 'policy'}+rollout4", env)
+
+
+def test_each_auv_acts_on_its_own_observation(tmp_path):
+    """Decentralised execution: an AUV's action changes only with its own observation."""
+    train_marl(tiny(agent_steps=128), tmp_path, progress=False)
+    env = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=5, layout="random")
+    env.reset(seed=2)
+    policy = load_policy(str(tmp_path / "policy"), env)
+    obs = padded_observations(env.unwrapped.mission, 4, 6)
+    alone = torch.stack([p.argmax(-1) for p in policy.logits(obs[:1])], -1)
+    together = torch.stack([p.argmax(-1) for p in policy.logits(obs)], -1)
+    assert torch.equal(alone[0], together[0])
+    assert policy(env, None).shape == (8,)
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"algorithm": "qmix"}, r"algorithm.*one of \('mappo', 'ippo'\)"),
+        ({"minibatch_size": 100}, "must divide steps_per_batch"),
+        ({"n_max": 1}, "n_max"),
+        ({"layout": "paper"}, "random"),
+    ],
+)
+def test_bad_configs_say_what_is_accepted(change, match):
+    with pytest.raises(ConfigError, match=match):
+        replace(tiny(), **change)
+
+
+@pytest.mark.parametrize("name", ["mappo-n2", "ippo-n2"])
+def test_shipped_configs_load(name):
+    cfg = MarlConfig.load(ROOT / "training" / "configs" / f"{name}.yaml")
+    assert cfg.algorithm == name.split("-")[0] and cfg.n_auvs == 2 and cfg.node_range == (3, 10)
+
+
+def test_train_marl_command(tmp_path, capsys):
+    config = tmp_path / "mappo-tiny.yaml"
+    config.write_text(
+        "name: mappo-tiny\nnode_range: [3, 4]\nphases: [{backend: kinematic, agent_steps: 64}]\n"
+        "steps_per_batch: 32\nminibatch_size: 32\nepochs: 1\nhidden: [8]\neval_episodes: 1\n"
+    )
+    out = tmp_path / "run"
+    args = ["train-marl", str(config), "--steps", "128", "--quiet", "--out", str(out)]
+    assert main(args) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["algorithm"] == "mappo" and summary["agent_steps"] == 128
+    assert (out / "policy" / "policy.json").is_file()
