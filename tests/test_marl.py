@@ -1,6 +1,8 @@
 """MAPPO and IPPO through TorchRL (`training.marl`) and the team policy they export."""
 
 import json
+import subprocess
+import sys
 from dataclasses import replace
 
 import gymnasium as gym
@@ -198,3 +200,21 @@ def test_train_marl_command(tmp_path, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["algorithm"] == "mappo" and summary["agent_steps"] == 128
     assert (out / "policy" / "policy.json").is_file()
+
+
+def test_torchrl_example_runs(tmp_path):
+    config = tmp_path / "mappo-tiny.yaml"
+    config.write_text(
+        "name: mappo-tiny\nn_max: 3\nnode_range: [3, 4]\nsteps_per_batch: 32\n"
+        "minibatch_size: 32\nepochs: 1\nhidden: [8]\neval_episodes: 1\n"
+    )
+    script = ROOT / "training" / "examples" / "torchrl_mappo.py"
+    args = ["--config", config, "--steps", "64", "--episodes", "1", "--out", tmp_path / "run"]
+    subprocess.run([sys.executable, script, *args], capture_output=True, check=True)
+    rows = json.loads((tmp_path / "run" / "evaluation.json").read_text())
+    assert [(r["policy"] == "greedy", r["n_auvs"]) for r in rows] == [
+        (True, 2),
+        (False, 2),
+        (True, 3),
+        (False, 3),
+    ]
