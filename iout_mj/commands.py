@@ -270,7 +270,13 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_train_marl(args: argparse.Namespace) -> int:
     """MAPPO or IPPO (`training.marl`): the run folder gets checkpoint/, policy/, curve.json."""
-    from iout_mj.training.marl import MarlConfig, train_marl  # heavy: TorchRL
+    try:
+        from iout_mj.training.marl import MarlConfig, train_marl  # heavy: TorchRL
+    except ImportError as exc:
+        raise UsageError(
+            f"train-marl needs TorchRL ({exc}): accepted an install with the mappo extra, "
+            "pip install -e '.[mappo]'"
+        ) from exc
 
     cfg = MarlConfig.load(args.marl_config)
     changes: dict[str, Any] = {}
