@@ -7,6 +7,7 @@ import shlex
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -319,12 +320,16 @@ def test_ctrl_c_ends_an_evaluation_and_its_workers_quietly(tmp_path):
         text=True,
         start_new_session=True,
     )
-    deadline = time.monotonic() + 60
-    while not (tmp_path / ".lock").exists() and time.monotonic() < deadline:
-        time.sleep(0.1)
-    time.sleep(3)  # the workers are running episodes
+    err_lines: list[str] = []  # stderr read as it comes: the progress bar says when it runs
+    reader = threading.Thread(target=lambda: err_lines.extend(iter(proc.stderr.readline, "")))
+    reader.start()
+    deadline = time.monotonic() + 120
+    while not re.search(r"\| [1-9]\d*/\d+", "".join(err_lines)) and time.monotonic() < deadline:
+        time.sleep(0.1)  # until the workers have finished an episode (the pool is up)
     os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
-    _, err = proc.communicate(timeout=60)
+    proc.wait(timeout=60)
+    reader.join(timeout=60)
+    err = "".join(err_lines)
     assert proc.returncode == 130, err
     assert "iout-mj evaluate: interrupted" in err and "Traceback" not in err
 

@@ -2,7 +2,9 @@
 for CI: one episode per cell on the kinematic model, a few slots of video, a smoke training
 of the same kind (`shortened` says exactly what changes). A `--resume` runs after the run it
 resumes; a training the README shows twice into one run folder starts it again (--overwrite);
-the benchmark is measured once (quick) and the later `bench` lines format that run."""
+a training that differs from one already run only in its seed and run folder loads its own
+config and copies that run; the
+benchmark is measured once (quick) and the later `bench` lines format that run."""
 
 import re
 import shlex
@@ -95,6 +97,13 @@ def shortened(argv: list[str]) -> list[str]:
     return a
 
 
+def _same_training(argv: list[str]) -> tuple[str, ...]:
+    """A shortened training without its seed, run folder and --overwrite."""
+    drop = {_option(argv, f) for f in ("--seed", "--out")} - {None}
+    skip = drop | {i + 1 for i in drop}
+    return tuple(x for i, x in enumerate(argv) if i not in skip and x != "--overwrite")
+
+
 def test_shortening_keeps_the_command_and_its_options():
     argv = shlex.split(
         "evaluate --policy greedy --n-auvs 1 2 --nodes 3 5 7 --episodes 20 --backend mujoco --out r"
@@ -121,6 +130,7 @@ def test_every_readme_command_runs_shortened(tmp_path, monkeypatch):
     shutil.copytree(ROOT / "training", tmp_path / "training")
     shutil.copytree(ROOT / "benchmarks", tmp_path / "benchmarks")
     done: set[tuple[str, ...]] = set()
+    trained: dict[tuple[str, ...], Path] = {}  # a smoke training -> its run folder
     for argv in readme_commands():
         if any(p in argv for p in PLACEHOLDERS):
             continue
@@ -137,8 +147,18 @@ def test_every_readme_command_runs_shortened(tmp_path, monkeypatch):
             continue
         done.add(tuple(short))
         again = short[0] == "train" and "--resume" not in short
-        if again and (tmp_path / short[_option(short, "--out") + 1]).exists():
-            short.append("--overwrite")  # a second training into one run folder starts again
+        if again:
+            out = tmp_path / short[_option(short, "--out") + 1]
+            earlier = trained.get(_same_training(short))
+            if earlier is not None and earlier != out:  # another seed of a run already made
+                from iout_mj.training import TrainConfig
+
+                TrainConfig.load(argv[1])
+                shutil.copytree(earlier, out, dirs_exist_ok=True)
+                continue
+            if out.exists():
+                short.append("--overwrite")  # a second training into one run folder starts again
+            trained[_same_training(short)] = out
         assert main(short) == 0, f"iout-mj {' '.join(short)} (README: {' '.join(argv)})"
 
 
