@@ -65,7 +65,7 @@ from iout_mj.agents.team_policy import (
     team_observation_size,
 )
 from iout_mj.backends.registry import SINGLE_ENV_BACKENDS
-from iout_mj.config import MAX_NODES, MIN_NODES, Config
+from iout_mj.config import Config
 from iout_mj.envs.gym_env import ENV_ID
 from iout_mj.errors import CheckpointError
 from iout_mj.mission import OBS_HIGH, OBS_LOW
@@ -78,7 +78,7 @@ from iout_mj.schema import (
     load_mapping,
     require,
 )
-from iout_mj.training.config import NAME
+from iout_mj.training.config import NAME, require_node_range
 from iout_mj.training.trainer import HELD_OUT_SEED
 
 ALGORITHMS = ("mappo", "ippo")
@@ -146,13 +146,7 @@ class MarlConfig:
         require(self.algorithm in ALGORITHMS, "algorithm", self.algorithm, f"one of {ALGORITHMS}")
         in_range(self, "n_auvs", 1, MAX_AUVS)
         in_range(self, "n_max", self.n_auvs, MAX_AUVS)
-        lo, hi = self.node_range
-        require(
-            MIN_NODES <= lo <= hi <= MAX_NODES,
-            "node_range",
-            list(self.node_range),
-            f"[low, high] with {MIN_NODES} <= low <= high <= {MAX_NODES}",
-        )
+        require_node_range(self.node_range)
         require(self.layout == "random", "layout", self.layout, "random (K varies per episode)")
         require(1 <= len(self.phases) <= 16, "phases", len(self.phases), "1 to 16 phases")
         in_range(self, "steps_per_batch", 1, 1 << 18)
