@@ -180,6 +180,14 @@ def test_every_shipped_config_loads():
     assert load_mapping(CONFIGS / "rl-zoo3-ppo.yml", "rl-zoo3 file")
 
 
+def test_the_realistic_channel_training_config_trains_on_the_shipped_channel():
+    """The training config repeats the env file's channel block; the two must not drift."""
+    env = Config.load(CONFIGS / "env" / "realistic-channel.yaml")
+    train = TrainConfig.load(CONFIGS / "ppo-general-n2-realistic-channel.yaml")
+    assert train.env.channel == env.channel
+    assert train.env.channel.features  # the channel is on, not the paper's default
+
+
 @pytest.mark.parametrize(
     ("name", "text", "match"),
     [
