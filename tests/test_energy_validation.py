@@ -2,10 +2,15 @@
 
 import dataclasses
 import itertools
+import re
+from pathlib import Path
 
+import numpy as np
 import pytest
 
-from iout_mj.experiments.energy_validation import maneuvers, steady_state
+from iout_mj.backends.mujoco.physics import AUVPhysics
+from iout_mj.config import Config
+from iout_mj.experiments.energy_validation import maneuvers, steady_state, validate_vehicle
 from iout_mj.scenarios import make_config
 
 
@@ -37,3 +42,52 @@ def test_every_manoeuvre_stays_within_v_max_and_reaches_it(v_max_mps):
 def test_the_ramp_of_a_1_mps_vehicle_ends_at_1_mps():
     ramp = maneuvers(with_v_max(1.0))[1]
     assert ramp.speed_mps == (0.4, 0.8, 1.0)
+
+
+README = Path(__file__).parents[1] / "README.md"
+
+
+def _readme_row(first_cell: str) -> list[str]:
+    """The cells of the README table row that starts with `first_cell`."""
+    for line in README.read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells and cells[0] == first_cell:
+            return cells
+    raise AssertionError(f"no README table row starts with {first_cell!r}")
+
+
+def _percent(text: str) -> float:
+    return float(re.search(r"([+-]?\d+\.\d) %", text).group(1)) / 100
+
+
+@pytest.mark.slow
+def test_the_readme_energy_headline_is_what_validate_energy_measures_on_the_remus():
+    """The README's headline numbers for the cubic model against the REMUS 100 (and its
+    published-data table) are the command's output, rounded as printed."""
+    result = validate_vehicle(Config().with_vehicle("remus100"))
+    mission = next(r for r in result["maneuvers"] if r["name"].startswith("mission"))
+    paper = next(r for r in result["paper_cd_s"]["maneuvers"] if r["name"].startswith("mission"))
+    row = _readme_row("a planner's whole mission (K = 7, 51 slots)")
+    assert mission["slots"] == 51
+    assert _percent(row[1]) == pytest.approx(mission["rel_error_path"], abs=5e-4)
+    assert _percent(row[2]) == pytest.approx(paper["rel_error_path"], abs=5e-4)
+    by_name = {r["quantity"]: r for r in result["published"]}
+    turn = _readme_row("rudder +4 deg: turning diameter (m)")
+    measured = by_name["rudder +4 deg: turning diameter, m"]["mujoco"]
+    assert float(turn[1]) == pytest.approx(measured, abs=0.05)
+
+
+def test_the_validation_flies_one_auv_whatever_the_config_s_n():
+    """A two-AUV config measures one vehicle's power, not the sum over two stacked hulls."""
+    one, two = (steady_state(make_config(n, 7), (2.0,))[0] for n in (1, 2))
+    assert two["measured_power_w"] == pytest.approx(one["measured_power_w"], rel=1e-9)
+    assert abs(one["rel_error"]) < 0.02
+
+
+def test_physics_refuses_one_auv_s_pose_for_two_naming_the_shape():
+    physics = AUVPhysics.from_config(make_config(2, 7))
+    with pytest.raises(ValueError, match=r"xy_m has shape \(1, 2\); accepted: \(2, 2\)"):
+        physics.set_poses(np.array([[1.0, 2.0]]), np.zeros(2), np.zeros(2))
+    with pytest.raises(ValueError, match=r"speed_setpoint_mps has shape \(1,\); accepted: \(2,\)"):
+        physics.set_commands(np.zeros(2), np.ones(1))
+    physics.free()

@@ -129,6 +129,9 @@ def _accepts_timestep(cfg: Config, dt_s: float) -> bool:
 
 
 def _physics(cfg: Config, dt_s: float) -> AUVPhysics:
+    """One AUV of the config's vehicle and motion at timestep `dt_s` (whatever the config's N:
+    the meter sums every AUV's energy)."""
+    cfg = make_config(1, 7, base=cfg)
     cfg = cfg.replace(physics=dataclasses.replace(cfg.physics, timestep_s=dt_s))
     return AUVPhysics.from_config(cfg)
 

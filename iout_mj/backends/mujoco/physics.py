@@ -128,14 +128,29 @@ class AUVPhysics(engine.Physics):
         return np.cos(yaw) * v[:, 0] + np.sin(yaw) * v[:, 1]
 
     # ------------------------------------------------------------------ commands
+    def _per_auv(self, name: str, values: FloatArray, tail: tuple[int, ...] = ()) -> FloatArray:
+        """`values` as an array of shape (n_auvs, *tail), or a ValueError naming that shape
+        (numpy would broadcast one AUV's values to all of them)."""
+        arr = np.asarray(values, dtype=float)
+        if arr.shape != (self.n_auvs, *tail):
+            raise ValueError(
+                f"{name} has shape {arr.shape}; accepted: {(self.n_auvs, *tail)}, one row per AUV"
+            )
+        return arr
+
     def set_commands(self, yaw_setpoint_rad: FloatArray, speed_setpoint_mps: FloatArray) -> None:
         """Heading (unwrapped) and speed setpoints for the low-level servos."""
+        yaw_setpoint_rad = self._per_auv("yaw_setpoint_rad", yaw_setpoint_rad)
+        speed_setpoint_mps = self._per_auv("speed_setpoint_mps", speed_setpoint_mps)
         ctrl = self.data.ctrl
         ctrl[self._yaw_act] = yaw_setpoint_rad
         ctrl[self._thrust] = vehicle.thrust_command(np.asarray(speed_setpoint_mps), self.cfg)
 
     def set_poses(self, xy_m: FloatArray, yaw_rad: FloatArray, speed_mps: FloatArray) -> None:
         """Place every AUV, moving at `speed_mps` along its heading, and zero the meters."""
+        xy_m = self._per_auv("xy_m", xy_m, (2,))
+        yaw_rad = self._per_auv("yaw_rad", yaw_rad)
+        speed_mps = self._per_auv("speed_mps", speed_mps)
         q, v = self.data.qpos, self.data.qvel
         q[self._qx], q[self._qy], q[self._qyaw] = xy_m[:, 0], xy_m[:, 1], yaw_rad
         v[self._vx] = speed_mps * np.cos(yaw_rad)
