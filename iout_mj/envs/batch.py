@@ -71,6 +71,9 @@ class BatchStep:
     """(B,) T_max reached."""
     ended: dict[int, tuple[np.ndarray, dict[str, Any]]] = field(default_factory=dict)
     """Env index -> (its last observation, {"metrics": ..., and "error" if it diverged})."""
+    channel: dict[str, np.ndarray] | None = None
+    """The slot's uplinks through the channel, (B, N) per quantity (`Mission.channel_info`);
+    None on the paper's channel."""
 
 
 def live_arrays(m: Mission) -> dict[str, np.ndarray]:
@@ -155,6 +158,7 @@ class MissionBatch:
         """Move every environment one slot, then restart those that ended (autoreset)."""
         m = self.mission
         rewards, failed = self.move(actions)
+        channel = m.channel_info()  # before a restart: the slot's links, not a new episode's
         obs = self.observe()
         terminated = m.state.terminated | failed
         truncated = m.state.truncated & ~failed
@@ -168,7 +172,8 @@ class MissionBatch:
                 ended[int(e)] = (obs[e].copy(), info)
             self.restart(done)
             obs[done] = self.observe()[done]
-        return BatchStep(obs, np.where(failed, 0.0, rewards), terminated, truncated, ended)
+        rewards = np.where(failed, 0.0, rewards)
+        return BatchStep(obs, rewards, terminated, truncated, ended, channel)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Copies of everything that changes as the batch steps, by name: the mission's state,

@@ -6,7 +6,9 @@ Autoreset is gymnasium's same-step mode (`metadata["autoreset_mode"]`): an envir
 ends is reset in the same step, the returned observation is its new episode's first, and
 `info["final_obs"]` / `info["final_info"]` (masked by `info["_final_obs"]`) hold the end of
 the old one, `final_info` with the episode's `metrics`. Every step's `info["reward_terms"]`
-holds each reward term for every environment.
+holds each reward term for every environment; with a channel on, `info["channel"]` holds the
+slot's per-AUV links as (B, N) arrays (`sinr_db`, `per`, `packets_sent`, `packets_received`;
+row e is environment e's `info["channel"]` of the gymnasium env).
 """
 
 from __future__ import annotations
@@ -95,6 +97,9 @@ class MultiAUVVectorEnv(VectorEnv):
             },
             "_reward_terms": np.ones(self.num_envs, dtype=bool),
         }
+        if step.channel is not None:
+            infos["channel"] = step.channel
+            infos["_channel"] = np.ones(self.num_envs, dtype=bool)
         for e, (final_obs, final) in step.ended.items():
             infos = self._add_info(infos, {"final_obs": final_obs, "final_info": final}, e)
         return step.obs, step.rewards, step.terminated, step.truncated, infos

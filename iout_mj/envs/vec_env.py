@@ -4,7 +4,9 @@ One `step` call moves all B environments (the same mission, network and reward c
 gymnasium env) with no Python loop over environments except the info dicts of the ones that
 finish. Finished environments restart at once (SB3 convention): their `info` holds
 `terminal_observation`, `TimeLimit.truncated` and `metrics` (and `error` if the physics
-diverged); wrap in SB3's `VecMonitor` for episode returns. The reward terms of the last step
+diverged); with a channel on, every info holds `channel` as the gymnasium env's does (the
+slot's per-AUV `sinr_db`, `per`, `packets_sent`, `packets_received`); wrap in SB3's
+`VecMonitor` for episode returns. The reward terms of the last step
 are `venv.mission.terms` (arrays of B), not per-step infos.
 """
 
@@ -39,11 +41,29 @@ def check_open(venv: Any) -> None:
         raise RuntimeError(f"this {type(venv).__name__} is closed: make a new one to step it")
 
 
+CHANNEL_INFO = ("sinr_db", "per", "packets_sent", "packets_received")
+"""The quantities of `info["channel"]` (`Mission.channel_info`), each a list over the AUVs."""
+
+
+def channel_infos(channel: dict[str, np.ndarray] | None, n_envs: int) -> list[dict[str, Any]]:
+    """Each environment's `{"channel": ...}` as the single env gives it (lists over AUVs), from
+    the batch's (B, N) arrays: one `tolist` per quantity, no Python loop over links; empty
+    dicts on the paper's channel."""
+    if channel is None:
+        return [{} for _ in range(n_envs)]
+    sinr, per, sent, received = (channel[name].tolist() for name in CHANNEL_INFO)
+    return [
+        {"channel": {"sinr_db": s, "per": p, "packets_sent": n, "packets_received": r}}
+        for s, p, n, r in zip(sinr, per, sent, received, strict=True)
+    ]
+
+
 def step_infos(step: BatchStep, n_envs: int) -> list[dict[str, Any]]:
-    """SB3's info dicts of a batch step: empty, or the end of an episode."""
-    infos: list[dict[str, Any]] = [{} for _ in range(n_envs)]
+    """SB3's info dicts of a batch step: the channel's links when a channel is on, and the end
+    of an episode."""
+    infos = channel_infos(step.channel, n_envs)
     for e, (final_obs, final) in step.ended.items():
-        infos[e] = {
+        infos[e] |= {
             # a diverged scene has no meaningful last state
             "terminal_observation": np.zeros_like(final_obs) if "error" in final else final_obs,
             "TimeLimit.truncated": bool(step.truncated[e]),
