@@ -25,7 +25,16 @@ from typing import Any, TypeAlias
 import numpy as np
 
 from iout_mj.backends.registry import BACKENDS
-from iout_mj.config import MAX_NODES, MIN_NODES, PAPER_LAYOUTS, Config, Point, ScenarioConfig
+from iout_mj.config import (
+    MAX_AUVS,
+    MAX_NODES,
+    MIN_NODES,
+    PAPER_LAYOUTS,
+    Config,
+    Point,
+    ScenarioConfig,
+)
+from iout_mj.errors import require_integer, require_seed
 from iout_mj.schema import ConfigError, load_mapping, require
 
 LAYOUTS = ("paper", "random")
@@ -59,18 +68,14 @@ SCENARIOS: dict[str, Scenario] = {
 
 def random_layout(
     n_nodes: int,
-    seed: int,
+    seed: int | None,
     scenario: ScenarioConfig | None = None,
     min_spacing_m: float = 80.0,
     margin_m: float = 50.0,
 ) -> tuple[Point, ...]:
     """Seeded node layout inside the area, `min_spacing_m` apart and outside the dock zone."""
-    require(
-        MIN_NODES <= n_nodes <= MAX_NODES,
-        "n_nodes",
-        n_nodes,
-        f"an integer from {MIN_NODES} to {MAX_NODES}",
-    )
+    n_nodes = require_integer(n_nodes, "n_nodes", MIN_NODES, MAX_NODES, ConfigError)
+    seed = require_seed(seed, "seed", allow_none=True, error=ConfigError)
     sc = scenario or ScenarioConfig()
     rng = np.random.default_rng(seed)
     lo = np.array([margin_m, margin_m])
@@ -104,6 +109,7 @@ def make_config(
         seed: seed of a random layout.
         base: config whose other sections are kept (defaults: the paper's).
     """
+    n_auvs, n_nodes = _counts(n_auvs, n_nodes)
     base = base or Config()
     if layout == "paper":
         require(
@@ -120,6 +126,15 @@ def make_config(
     nodes = tuple((float(x), float(y)) for x, y in nodes)
     scenario = dataclasses.replace(base.scenario, n_auvs=n_auvs, nodes_m=nodes)
     return base.replace(scenario=scenario)
+
+
+def _counts(n_auvs: Any, n_nodes: Any) -> tuple[Any, Any]:
+    """N and K checked as integers in the config's ranges (None: left to the config)."""
+    if n_auvs is not None:
+        n_auvs = require_integer(n_auvs, "n_auvs", 1, MAX_AUVS, ConfigError)
+    if n_nodes is not None:
+        n_nodes = require_integer(n_nodes, "n_nodes", MIN_NODES, MAX_NODES, ConfigError)
+    return n_auvs, n_nodes
 
 
 def load_config(config: ConfigLike) -> Config:
@@ -282,9 +297,10 @@ def resolve(
         flag = {"n_auvs": "--n-auvs", "n_nodes": "--nodes", "layout": "--layout"}[key]
         return f"{flag} {value}" if flags else f"{key}={value!r}"
 
-    if backend not in BACKENDS:
+    if not isinstance(backend, str) or backend not in BACKENDS:
         raise ConfigError(f"backend={backend!r} is invalid: accepted one of {tuple(BACKENDS)}")
-    if layout is not None and layout not in LAYOUTS:
+    n_auvs, n_nodes = _counts(n_auvs, n_nodes)
+    if layout is not None and (not isinstance(layout, str) or layout not in LAYOUTS):
         raise ConfigError(f"layout={layout!r} is invalid: accepted one of {LAYOUTS}")
     if isinstance(config, EnvSpec):  # already resolved: keywords may only repeat it
         asked = {"n_auvs": n_auvs, "n_nodes": n_nodes, "layout": layout}
