@@ -176,11 +176,11 @@ DEFAULT_CANDIDATES = 16
 
 def split_search(name: str) -> tuple[str, int | None]:
     """(the trained policy, candidates per slot) of `P+rollout[C]`; (name, None) otherwise."""
-    found = re.fullmatch(rf"(.+){re.escape(SEARCH_SUFFIX)}(\d*)", name)
+    found = re.fullmatch(rf"(.+){re.escape(SEARCH_SUFFIX)}([^/\\]*)", name, re.DOTALL)
     if found is None:
         return name, None
     base, count = found.groups()
-    if count and not 1 <= int(count) <= MAX_CANDIDATES:
+    if not re.fullmatch("[0-9]*", count) or (count and not 1 <= int(count) <= MAX_CANDIDATES):
         raise PolicyError(
             f"policy {name!r}: accepted {base}{SEARCH_SUFFIX} ({DEFAULT_CANDIDATES} candidates "
             f"per slot) or {base}{SEARCH_SUFFIX}<C> with C from 1 to {MAX_CANDIDATES}"
@@ -191,6 +191,11 @@ def split_search(name: str) -> tuple[str, int | None]:
 def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) -> Any:
     """A callable `policy(env, obs) -> action`: a baseline name or a trained policy (name or
     folder), checked against `env`; `P+rollout[C]` is P improved by rollouts (`search`)."""
+    if not isinstance(name, str) or not name:
+        raise PolicyError(
+            f"policy {name!r}: accepted a name ({', '.join(POLICIES)}, a shipped policy "
+            f"{shipped_policies()}) or a policy folder, as a non-empty string"
+        )
     base, candidates = split_search(name)
     if candidates is not None:
         from iout_mj.agents.search import RolloutSearch  # the batch: imported when searched

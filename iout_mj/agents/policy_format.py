@@ -46,7 +46,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from iout_mj.agents.policy_bounds import check_network
 from iout_mj.agents.shipped import MANIFEST
 from iout_mj.agents.token_policy import TokenPolicy
-from iout_mj.errors import PolicyError
+from iout_mj.errors import PolicyError, PolicyMismatchError
 from iout_mj.errors import PolicyFormatError as PolicyFormatError  # re-exported
 from iout_mj.files import fsync_dir, parse_json, read_capped, remove, sha256_file, write_new
 from iout_mj.files import write_atomic as write_atomic  # re-exported
@@ -98,9 +98,40 @@ class LoadedPolicy:
     """The VecNormalize a legacy policy was read with (None in the safe format)."""
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """The deterministic action for one observation (or a batch) of the policy's kind."""
+        """The deterministic action for one observation (or a batch) of the policy's kind
+        (`check_observation`)."""
+        self.check_observation(obs)
         action, _ = self.policy.predict(self.normalizer(obs), deterministic=True)
         return action
+
+    def check_observation(self, obs: np.ndarray) -> None:
+        """Refuse an observation (or a batch) the policy cannot read: O(1) in its size, and
+        one vectorised finiteness test.
+
+        Raises:
+            PolicyMismatchError: another size than the policy observes (an env of another N
+                or K than it serves).
+            PolicyError: the observation holds NaN or infinity.
+        """
+        obs = np.asarray(obs)
+        size = self.normalizer.mean.shape[0]
+        if obs.ndim not in (1, 2) or obs.shape[-1] != size:
+            m = self.manifest
+            serves = (
+                f"N={m.get('n_auvs')}, K up to {m.get('k_max')}"
+                if self.general
+                else f"N={m.get('n_auvs')}, K={m.get('n_nodes')}"
+            )
+            raise PolicyMismatchError(
+                f"an observation of shape {obs.shape} for a policy that observes {size} entries "
+                f"({serves}): accepted ({size},) or a batch (B, {size}), from an env of a "
+                "scenario it serves"
+            )
+        if not np.isfinite(obs).all():
+            raise PolicyError(
+                "the observation holds NaN or infinity: accepted finite observations (an env "
+                "whose state diverged must be reset)"
+            )
 
     @property
     def general(self) -> bool:

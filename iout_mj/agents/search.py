@@ -18,9 +18,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from iout_mj.agents.policies import MAX_CANDIDATES
 from iout_mj.agents.policy_format import LoadedPolicy
 from iout_mj.agents.token_policy import PaddedMultiCategorical
 from iout_mj.envs.batch import MissionBatch, live_arrays
+from iout_mj.errors import require_integer, require_seed
 
 UNDOCKED_PENALTY = 1000.0
 """Score added per AUV not docked at the end: docking comes before any AoI."""
@@ -31,23 +33,23 @@ class RolloutSearch:
 
     Args:
         base: a trained general (token) policy.
-        candidates: joint actions tried per slot (the base action and candidates - 1 samples).
+        candidates: joint actions tried per slot (the base action and candidates - 1 samples),
+            an integer from 1 to `MAX_CANDIDATES`.
         seed: seeds the sampling of candidates (`reset(seed)` reseeds it per episode).
     """
 
     def __init__(self, base: LoadedPolicy, candidates: int = 16, seed: int = 0) -> None:
         if not base.general:
             raise ValueError("rollout search needs a general (token) policy: accepted ppo-general")
-        if candidates < 1:
-            raise ValueError(f"candidates={candidates}: accepted an integer >= 1")
-        self.base, self.candidates = base, int(candidates)
+        self.candidates = require_integer(candidates, "candidates", 1, MAX_CANDIDATES)
+        self.base = base
         self.k_max = int(base.manifest["k_max"])
-        self.rng = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(require_seed(seed))
         self._batch: MissionBatch | None = None
         self._key: tuple[Any, ...] = ()
 
     def reset(self, seed: int | None) -> None:
-        self.rng = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(require_seed(seed, allow_none=True))
 
     def __call__(self, env: Any, obs: np.ndarray) -> np.ndarray:
         mission = env.unwrapped.mission
@@ -61,6 +63,7 @@ class RolloutSearch:
 
     def _candidate_actions(self, tokens: np.ndarray) -> np.ndarray:
         """(C, dims) distinct joint actions: the deterministic one first, then samples."""
+        self.base.check_observation(tokens[None])
         normalized = torch.as_tensor(self.base.normalizer(tokens[None]))
         with torch.no_grad():
             distribution = self.base.policy.get_distribution(normalized)
