@@ -105,8 +105,14 @@ def compare(
     aggregate over those cells (`statistics.comparison`); the bootstrap is seeded by `seed`.
 
     Raises:
-        UsageError: no cell holds both, or the cells hold unequal numbers of runs.
+        UsageError: the policy is its own reference, no cell holds both, or the cells hold
+            unequal numbers of runs.
     """
+    if policy == reference:
+        raise UsageError(
+            f"policy and reference are both {policy!r}: accepted two different policies (or "
+            f"the reference {BEST_PLANNER})"
+        )
     refs = references(rows, policy, reference)
     summary = {(r["policy"], cell_of(r)): r for r in rows}
     mine_runs = statistics.aoi_runs(episodes, policy)

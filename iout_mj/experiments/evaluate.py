@@ -34,7 +34,14 @@ from iout_mj.agents.policy_format import MANIFEST
 from iout_mj.agents.registry import POLICIES
 from iout_mj.agents.rollout import run_episode
 from iout_mj.envs import ENV_ID
-from iout_mj.errors import PolicyError, PolicyMismatchError, UsageError
+from iout_mj.errors import (
+    MAX_SEED,
+    PolicyError,
+    PolicyMismatchError,
+    UsageError,
+    require_integer,
+    require_seed,
+)
 from iout_mj.files import write_atomic
 from iout_mj.mission.stats import SUMMARY_KEYS, episode_summary
 from iout_mj.runtime import cpu_bounded, usable_cpus
@@ -331,11 +338,7 @@ def evaluate(
     tasks: the same rows. `workers` is at most the CPUs this process may use (default: as
     many as there are CPUs and episodes); a policy, N or K given twice is refused. A learned
     policy flies each of `training_seeds` (default [0]: itself; `seed_variant`)."""
-    if episodes < 1:
-        raise UsageError(f"episodes={episodes}: accepted an integer >= 1")
-    training_seeds = [0] if training_seeds is None else list(training_seeds)
-    if not training_seeds or min(training_seeds) < 0:
-        raise UsageError(f"training seeds {training_seeds}: accepted one or more integers >= 0")
+    training_seeds = _check_arguments(policies, n_auvs, nodes, episodes, seed, training_seeds)
     named = (("policy", policies), ("N", n_auvs), ("K", nodes), ("training seed", training_seeds))
     for what, values in named:
         _once_each(what, list(values or []))
@@ -361,6 +364,35 @@ def evaluate(
     return summarize(results), results
 
 
+def _check_arguments(
+    policies: Any, n_auvs: Any, nodes: Any, episodes: Any, seed: Any, training_seeds: Any
+) -> list[int]:
+    """`evaluate`'s arguments, checked before any policy is read; returns the training seeds
+    (default [0]). Every episode seed S + e must be a seed the backends take."""
+    if isinstance(policies, str) or not isinstance(policies, (list, tuple)) or not policies:
+        raise UsageError(
+            f"policies={policies!r:.80}: accepted a non-empty list of policy names or folders"
+        )
+    if not all(isinstance(p, str) for p in policies):
+        raise UsageError(f"policies={policies!r:.80}: accepted names or folders as strings")
+    for what, values in (("n_auvs", n_auvs), ("nodes", nodes)):
+        if values is not None and not isinstance(values, (list, tuple)):
+            raise UsageError(f"{what}={values!r:.80}: accepted a list of integers, or None")
+    require_integer(episodes, "episodes", 1, MAX_EPISODES)
+    require_seed(seed)
+    if seed + episodes - 1 > MAX_SEED:
+        raise UsageError(
+            f"seed={seed} with episodes={episodes}: the episode seeds run to "
+            f"{seed + episodes - 1}; accepted seed + episodes - 1 <= {MAX_SEED}"
+        )
+    seeds = [0] if training_seeds is None else list(training_seeds)
+    if not seeds:
+        raise UsageError("training_seeds=[]: accepted one or more integers >= 0 (or None: [0])")
+    for i, k in enumerate(seeds):
+        require_integer(k, f"training_seeds[{i}]", 0, MAX_SEED)
+    return seeds
+
+
 def _row_order(row: dict[str, Any]) -> tuple[Any, ...]:
     """Episode rows by policy, N, K, training seed (a baseline's first), episode seed."""
     trained = row["training_seed"]
@@ -381,6 +413,8 @@ def _traced(spec: EnvSpec) -> bool:
 def save(rows: list[dict[str, Any]], episodes: list[dict[str, Any]], out: Path) -> None:
     """results.json, results.csv, episodes.json and traces.json (one K = 7 episode each), each
     replaced whole; a failed write (a full disk, ...) raises `UsageError` naming the file."""
+    if not rows:
+        raise UsageError("no summary rows to save: accepted the rows `evaluate` returns")
     table = io.StringIO(newline="")
     writer = csv.DictWriter(table, fieldnames=list(rows[0]))
     writer.writeheader()

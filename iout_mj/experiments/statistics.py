@@ -20,10 +20,12 @@ from typing import Any
 import numpy as np
 from rliable import library, metrics
 
-from iout_mj.errors import UsageError
+from iout_mj.errors import ResultFileError, UsageError, require_integer, require_seed
 
 REPS = 2000
 """Bootstrap resamples of every interval by default."""
+MAX_REPS = 1_000_000
+"""Bootstrap resamples at most (each a resample of every score matrix)."""
 CONFIDENCE = 0.95
 MEASURE = "mean_aoi_horizon"
 """The compared score: the mean AoI over T_max of an episode (lower is better)."""
@@ -67,12 +69,33 @@ def _estimates(
     """rliable's point estimates of the vector `func` and their stratified-bootstrap intervals:
     one score matrix (runs x tasks) resampled by runs within each task, or a list of them, each
     resampled so (independently of the others)."""
+    require_integer(reps, "reps", 1, MAX_REPS)
+    require_seed(seed)
+    matrices = scores if isinstance(scores, list) else [scores]
+    if not matrices:
+        raise UsageError("no score matrix: accepted one or more (one per cell)")
+    for matrix in matrices:
+        _check_scores(matrix)
     with _seeded(seed):
         point, interval = library.get_interval_estimates(
             {"x": scores}, func, reps=reps, confidence_interval_size=CONFIDENCE
         )
     low, high = interval["x"]
     return [Estimate(*map(float, v)) for v in zip(point["x"], low, high, strict=True)]
+
+
+def _check_scores(matrix: np.ndarray, what: str = "a score matrix") -> None:
+    """A score matrix rliable can bootstrap: runs x tasks, at least one of each, finite."""
+    if matrix.ndim != 2 or 0 in matrix.shape:
+        raise UsageError(
+            f"{what}: shape {matrix.shape}; accepted runs x tasks with at least one run and "
+            "one task (a cell without episodes has no estimate)"
+        )
+    if not np.isfinite(matrix).all():
+        raise UsageError(
+            f"{what}: NaN or infinity; accepted finite scores (an episode whose physics "
+            "diverged has no AoI to compare)"
+        )
 
 
 def _column(runs: np.ndarray) -> np.ndarray:
@@ -96,6 +119,11 @@ def probability_of_improvement(
     runs x tasks with the same tasks; their run counts may differ."""
     func = lambda x, y: np.array([metrics.probability_of_improvement(x, y)])  # noqa: E731
     scores = [-np.asarray(aoi, dtype=float), -np.asarray(reference_aoi, dtype=float)]
+    if scores[0].ndim == scores[1].ndim == 2 and scores[0].shape[1] != scores[1].shape[1]:
+        raise UsageError(
+            f"{scores[0].shape[1]} tasks of the policy and {scores[1].shape[1]} of the "
+            "reference: accepted runs x tasks matrices with the same tasks (columns)"
+        )
     return _estimates(scores, func, reps, seed)[0]
 
 
@@ -113,6 +141,7 @@ def cells_improvement(
     both) and its average over cells (rliable's probability of improvement of the runs x cells
     matrices), each with its CI, from one bootstrap that resamples every cell's runs of each
     policy on their own (run counts may differ between cells)."""
+    _check_pairs(aoi, reference_aoi)
     columns = [-_column(r) for pair in zip(aoi, reference_aoi, strict=True) for r in pair]
 
     def func(*cells: np.ndarray) -> np.ndarray:
@@ -131,11 +160,20 @@ def cell_of(row: dict[str, Any]) -> Cell:
 def aoi_runs(episodes: list[dict[str, Any]], policy: str) -> dict[Cell, np.ndarray]:
     """The AoI(Tmax) of every run of `policy` per cell, in (training seed, episode seed) order."""
     runs: dict[Cell, list[tuple[int, int, float]]] = {}
+    seen: set[tuple[Cell, int, int]] = set()
     for e in episodes:
         if e["policy"] == policy:
             trained = e.get("training_seed")
             key = (-1 if trained is None else trained, e["seed"], float(e[MEASURE]))
-            runs.setdefault(cell_of(e), []).append(key)
+            cell = cell_of(e)
+            if (cell, *key[:2]) in seen:
+                raise ResultFileError(
+                    f"the episodes hold {policy!r} at N={cell[0]}, K={cell[1]}, episode seed "
+                    f"{e['seed']}, training seed {trained} more than once: accepted each "
+                    "episode once (one evaluation's episodes.json; its runs would count twice)"
+                )
+            seen.add((cell, *key[:2]))
+            runs.setdefault(cell, []).append(key)
     return {cell: np.array([r[2] for r in sorted(rs)]) for cell, rs in runs.items()}
 
 
@@ -149,6 +187,8 @@ def score_matrix(columns: list[np.ndarray], what: str) -> np.ndarray:
     """Runs x cells from one run vector per cell (`what`'s); cells of unequal run counts are
     refused rather than truncated (rliable's IQM over cells takes a full matrix, and cutting
     runs would drop episodes or training seeds without a trace)."""
+    if not columns:
+        raise UsageError(f"no cell of {what}: accepted one run vector per cell, at least one")
     counts = sorted({len(c) for c in columns})
     if len(counts) > 1:
         raise UsageError(
@@ -164,8 +204,29 @@ def normalised_iqm(
 ) -> Estimate:
     """The IQM over cells of the policy's AoI divided, cell by cell, by the reference's mean
     AoI there (lower is better; 1 is the reference's mean), with its CI stratified by cell."""
+    _check_pairs(aoi, reference_aoi, divides=True)
     means = np.array([r.mean() for r in reference_aoi])
     return iqm(score_matrix(aoi, "the policy") / means, reps, seed)
+
+
+def _check_pairs(
+    aoi: list[np.ndarray], reference_aoi: list[np.ndarray], divides: bool = False
+) -> None:
+    """One non-empty, finite run vector of each per cell, at least one cell; with `divides`
+    every reference AoI > 0 (its mean divides)."""
+    if not aoi or len(aoi) != len(reference_aoi):
+        raise UsageError(
+            f"{len(aoi)} cells of the policy and {len(reference_aoi)} of the reference: "
+            "accepted one run vector of each per cell, in the same cell order, at least one cell"
+        )
+    for i, (mine, theirs) in enumerate(zip(aoi, reference_aoi, strict=True)):
+        for what, runs in (("policy", mine), ("reference", theirs)):
+            _check_scores(_column(runs), f"the {what}'s runs in cell {i}")
+        if divides and not (np.asarray(theirs, dtype=float) > 0).all():
+            raise UsageError(
+                f"cell {i}: the reference's runs hold an AoI <= 0: accepted AoI > 0 (the ratios "
+                "divide by the reference's mean)"
+            )
 
 
 def comparison(
@@ -175,6 +236,7 @@ def comparison(
     order): per cell the IQM AoI of both with their CIs, the ratio of the IQMs and
     P(policy AoI < reference AoI) with its CI; then the aggregate (`normalised_iqm`, the
     probability of improvement averaged over cells)."""
+    _check_pairs(aoi, reference_aoi, divides=True)
     iqms = cells_iqm([*aoi, *reference_aoi], reps, seed)
     better, overall = cells_improvement(aoi, reference_aoi, reps, seed)
     cells = [
