@@ -20,6 +20,7 @@ from dm_env import specs
 
 from iout_mj import native
 from iout_mj.config import Config
+from iout_mj.errors import require_seed
 from iout_mj.mission import Mission
 
 
@@ -40,11 +41,12 @@ class KinematicEnvironment(dm_env.Environment):
     def __init__(self, cfg: Config, seed: int | None = None, random_layout: bool = False):
         self.cfg = cfg
         self.mission = Mission(cfg, random_layout_per_episode=random_layout)
-        self.random = np.random.RandomState(seed)
+        self.random = np.random.RandomState(require_seed(seed, allow_none=True))
         self._reset_next = True
 
     def reseed(self, seed: int | None) -> None:
-        self.random = np.random.RandomState(seed)
+        """The task RNG restarted from `seed` (an integer from 0 to 2^32 - 1, or None)."""
+        self.random = np.random.RandomState(require_seed(seed, allow_none=True))
 
     def reset(self) -> dm_env.TimeStep:
         self.mission.reset(self.random)

@@ -19,7 +19,8 @@ from dm_control.rl.control import PhysicsError
 from mujoco import rollout
 
 from iout_mj.backends.mujoco import names, vehicle
-from iout_mj.config import Config
+from iout_mj.config import MAX_SUBSTEPS_PER_SLOT, Config
+from iout_mj.errors import UsageError, require_integer
 from iout_mj.types import BoolArray, FloatArray, IntArray
 from iout_mj.world import propulsion
 from iout_mj.world.geometry import norm_xy, wrap_angle
@@ -129,14 +130,9 @@ class AUVPhysics(engine.Physics):
 
     # ------------------------------------------------------------------ commands
     def _per_auv(self, name: str, values: FloatArray, tail: tuple[int, ...] = ()) -> FloatArray:
-        """`values` as an array of shape (n_auvs, *tail), or a ValueError naming that shape
-        (numpy would broadcast one AUV's values to all of them)."""
-        arr = np.asarray(values, dtype=float)
-        if arr.shape != (self.n_auvs, *tail):
-            raise ValueError(
-                f"{name} has shape {arr.shape}; accepted: {(self.n_auvs, *tail)}, one row per AUV"
-            )
-        return arr
+        """`values` as a finite array of shape (n_auvs, *tail), or a ValueError naming that
+        shape (numpy would broadcast one AUV's values to all of them; MuJoCo would fly NaN)."""
+        return _finite_shaped(name, values, (self.n_auvs, *tail), "one row per AUV")
 
     def set_commands(self, yaw_setpoint_rad: FloatArray, speed_setpoint_mps: FloatArray) -> None:
         """Heading (unwrapped) and speed setpoints for the low-level servos."""
@@ -164,6 +160,8 @@ class AUVPhysics(engine.Physics):
 
     def place_scene(self, nodes_m: FloatArray, current_mps: FloatArray) -> None:
         """Move the node markers and set the ocean current (MuJoCo wind) for an episode."""
+        nodes_m = _finite_shaped("nodes_m", nodes_m, (len(self._nodes), 2), "one row per node")
+        current_mps = _finite_shaped("current_mps", current_mps, (2,), "(east, north) in m/s")
         m = self.model.ptr
         m.body_pos[self._nodes, :2] = nodes_m
         m.opt.wind[:2] = current_mps
@@ -199,6 +197,16 @@ class AUVPhysics(engine.Physics):
         super().free()
 
 
+def _finite_shaped(name: str, values: Any, shape: tuple[int, ...], meaning: str) -> FloatArray:
+    """`values` as a float array of exactly `shape` and finite, or a ValueError saying so."""
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != shape:
+        raise ValueError(f"{name} has shape {arr.shape}; accepted: {shape}, {meaning}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} holds NaN or infinity; accepted finite values, {meaning}")
+    return arr
+
+
 DIVERGED = "physics diverged: MuJoCo found a bad position, velocity or acceleration and reset"
 
 
@@ -219,7 +227,16 @@ class Stepper:
 
     def step(self, physics: Sequence[AUVPhysics], nstep: int) -> BoolArray:
         """Advance every physics `nstep` substeps; returns which of them diverged (MuJoCo
-        reset its state, or it is not finite) in the meantime."""
+        reset its state, or it is not finite) in the meantime.
+
+        Raises:
+            UsageError: no physics, or `nstep` is not an integer from 1 to the substeps a slot
+                may have.
+            ValueError: physics of scenes of different sizes (another N).
+        """
+        if not physics:
+            raise UsageError("no physics to step: accepted one or more AUVPhysics")
+        require_integer(nstep, "nstep", 1, MAX_SUBSTEPS_PER_SLOT)
         models = [p.model.ptr for p in physics]
         m = models[0]
         if not self._scratch:  # one workspace per thread; each physics keeps its own data
@@ -233,9 +250,15 @@ class Stepper:
                 np.empty((len(physics), nstep, m.nsensordata)),
             )
         state0, ctrl, state, sensordata = self._buffers
-        for i, p in enumerate(physics):
-            mujoco.mj_getState(models[i], p.data.ptr, state0[i], _STATE_SPEC)
-            ctrl[i] = p.data.ptr.ctrl
+        try:  # MuJoCo checks each state's size; the rollout below (skip_checks) would not
+            for i, p in enumerate(physics):
+                mujoco.mj_getState(models[i], p.data.ptr, state0[i], _STATE_SPEC)
+                ctrl[i] = p.data.ptr.ctrl
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                "the physics stepped together are scenes of different sizes: accepted "
+                f"AUVPhysics of one config's N ({exc})"
+            ) from exc
         if self.recorded is not None:
             self.recorded.extend((state0[i].copy(), ctrl[i, 0].copy()) for i in range(len(physics)))
         self._rollout.rollout(

@@ -16,6 +16,7 @@ from dm_env import specs
 
 from iout_mj.backends.mujoco.physics import AUVPhysics
 from iout_mj.config import Config
+from iout_mj.errors import require_seed
 from iout_mj.mission import Mission
 
 
@@ -66,7 +67,8 @@ class DataCollectionTask(base.Task):
         self.mission = Mission(cfg, random_layout_per_episode=random_layout)
 
     def reseed(self, seed: int | None) -> None:
-        self._random = np.random.RandomState(seed)
+        """The task RNG restarted from `seed` (an integer from 0 to 2^32 - 1, or None)."""
+        self._random = np.random.RandomState(require_seed(seed, allow_none=True))
 
     def initialize_episode(self, physics: AUVPhysics) -> None:
         self.mission.reset(self.random)
@@ -109,6 +111,7 @@ def make_environment(
     cfg: Config, seed: int | None = None, random_layout: bool = False
 ) -> control.Environment:
     """The dm_control environment: AUVPhysics + DataCollectionTask, one slot per step."""
+    require_seed(seed, allow_none=True)
     physics = AUVPhysics.from_config(cfg)
     task = DataCollectionTask(cfg, random=seed, random_layout=random_layout)
     n_sub = substeps_per_slot(cfg, physics.dt_s)
