@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import re
-from dataclasses import asdict, dataclass, field
+import typing
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,7 @@ from iout_mj.config import MAX_NODES, MIN_NODES, Config
 from iout_mj.scenarios import EnvSpec, resolve
 from iout_mj.schema import (
     ConfigError,
+    _convert,
     build_dataclass,
     check_finite,
     in_range,
@@ -33,6 +35,18 @@ a token observation of up to ~4 kB each, so it stays under ~1 GB."""
 MAX_ENVS = 1024
 MAX_LAYERS, MAX_WIDTH = 8, 2048
 """net_arch: at most 8 layers of 2048 (33M parameters, 0.4 GB with Adam's moments)."""
+
+
+def check_types(config: Any) -> None:
+    """A config built in code is checked as one read from a file: every field against its
+    annotation (integers, numbers, strings, lists, sections), before any range check; lists
+    become tuples and mappings sections, as when read (`schema.build_dataclass`)."""
+    hints = typing.get_type_hints(type(config))
+    for f in fields(config):
+        value = getattr(config, f.name)
+        converted = _convert(hints[f.name], value, f.name)
+        if converted is not value:
+            object.__setattr__(config, f.name, converted)  # frozen: set once, while built
 
 
 def require_node_range(node_range: tuple[int, int], alternative: str = "") -> None:
@@ -57,6 +71,7 @@ class PhaseConfig:
     their K spread evenly over [low, high] (`scenario_ks`); None: the config's node_range."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         require(self.backend in BACKENDS, "backend", self.backend, f"one of {BACKENDS}")
         in_range(self, "timesteps", 1, MAX_TIMESTEPS)
         if self.node_range is not None:
@@ -86,6 +101,7 @@ class ImitationConfig:
     def __post_init__(self) -> None:
         from iout_mj.agents.registry import POLICIES as PLANNERS
 
+        check_types(self)
         check_finite(self)
         require(self.planner in PLANNERS, "planner", self.planner, f"one of {sorted(PLANNERS)}")
         for name in ("episodes", "round_episodes"):
@@ -145,6 +161,7 @@ class TrainConfig:
     torch_threads: int = 1
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         require(bool(NAME.fullmatch(self.name)), "name", self.name, "letters, digits, - _ .")
         self.env_spec  # noqa: B018 (resolves the scenario: a contradiction raises here)
@@ -172,10 +189,12 @@ class TrainConfig:
         require(self.policy in POLICIES, "policy", self.policy, f"one of {POLICIES}")
         require_node_range(self.node_range)
         require(
-            bool(self.noise_models) and set(self.noise_models) <= set(NOISE_MODELS),
+            bool(self.noise_models)
+            and set(self.noise_models) <= set(NOISE_MODELS)
+            and len(set(self.noise_models)) == len(self.noise_models),
             "noise_models",
             list(self.noise_models),
-            f"a non-empty list of {NOISE_MODELS}",
+            f"a non-empty list of {NOISE_MODELS}, each once (a repeat would double its cells)",
         )
         in_range(self, "width", 4, 1024)
         require(self.width % 4 == 0, "width", self.width, "a multiple of 4 (the attention's heads)")

@@ -70,6 +70,7 @@ from iout_mj.envs.gym_env import ENV_ID
 from iout_mj.errors import CheckpointError
 from iout_mj.mission import OBS_HIGH, OBS_LOW
 from iout_mj.mission.actions import ActionError
+from iout_mj.scenarios import resolve
 from iout_mj.schema import (
     ConfigError,
     build_dataclass,
@@ -78,7 +79,7 @@ from iout_mj.schema import (
     load_mapping,
     require,
 )
-from iout_mj.training.config import NAME, require_node_range
+from iout_mj.training.config import NAME, check_types, require_node_range
 from iout_mj.training.trainer import HELD_OUT_SEED
 
 ALGORITHMS = ("mappo", "ippo")
@@ -98,6 +99,7 @@ class MarlPhase:
     """AUV decisions (N per joint step) in this phase."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         require(
             self.backend in SINGLE_ENV_BACKENDS,
             "backend",
@@ -141,6 +143,7 @@ class MarlConfig:
     torch_threads: int = 1
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         require(bool(NAME.fullmatch(self.name)), "name", self.name, "letters, digits, - _ .")
         require(self.algorithm in ALGORITHMS, "algorithm", self.algorithm, f"one of {ALGORITHMS}")
@@ -148,6 +151,8 @@ class MarlConfig:
         in_range(self, "n_max", self.n_auvs, MAX_AUVS)
         require_node_range(self.node_range)
         require(self.layout == "random", "layout", self.layout, "random (K varies per episode)")
+        # the scenario every episode resolves (K varies): N within the env's, no contradiction
+        resolve(self.env, self.n_auvs, self.k_max, self.layout)
         require(1 <= len(self.phases) <= 16, "phases", len(self.phases), "1 to 16 phases")
         in_range(self, "steps_per_batch", 1, 1 << 18)
         in_range(self, "minibatch_size", 1, 1 << 18)
