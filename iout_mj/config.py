@@ -321,6 +321,17 @@ class ChannelConfig:
         """Whether `feature` (one of CHANNEL_FEATURES) is turned on."""
         return feature in self.features
 
+    @property
+    def label(self) -> str:
+        """The channel in one word for result rows and figures: "paper" (no feature, Thorp),
+        else its features and a non-Thorp absorption joined by '+' ("depth+packets", ...)."""
+        extra = () if self.absorption == "thorp" else (self.absorption,)
+        return "+".join((*self.features, *extra)) or PAPER_CHANNEL
+
+
+PAPER_CHANNEL = "paper"
+"""`ChannelConfig.label` of the paper's deterministic channel."""
+
 
 @dataclass(frozen=True)
 class NetworkConfig:

@@ -1,8 +1,8 @@
 """Figures from missions and evaluation results (matplotlib, Agg backend).
 
-Every results figure is titled with its condition (noise model and current when the results
-record them, backend, layout, episodes per cell); error bars are 95 % confidence intervals of
-the mean over episodes (Student t), clipped to the measure's range.
+Every results figure is titled with its condition (noise model, current and acoustic channel
+when the results record them, backend, layout, episodes per cell); error bars are 95 %
+confidence intervals of the mean over episodes (Student t), clipped to the measure's range.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
 from iout_mj import palette
+from iout_mj.config import PAPER_CHANNEL
 from iout_mj.errors import ResultFileError
 from iout_mj.experiments.result_files import (
     array,
@@ -331,9 +332,21 @@ def _values(rows: list[dict[str, Any]], key: str) -> list[Any]:
     return sorted({r[key] for r in rows if key in r})
 
 
+def channel_text(rows: list[dict[str, Any]]) -> str:
+    """The acoustic channel of the rows (`ChannelConfig.label`, when they record it): "the
+    paper's channel", or "channel: " and its features; "" when no row records it."""
+    labels = [str(c) for c in _values(rows, "channel")]
+    named = [
+        "the paper's channel" if c == PAPER_CHANNEL else "channel: " + c.replace("+", ", ")
+        for c in labels
+    ]
+    return " / ".join(named)
+
+
 def condition(rows: list[dict[str, Any]]) -> str:
     """The condition of an evaluation, from its rows: noise model and current (when the rows
-    record them), backend, layout and episodes per cell."""
+    record them), backend, layout and episodes per cell; then, on a line of its own, the
+    acoustic channel (when the rows record it)."""
     noise = _values(rows, "noise_model")
     parts = [
         " / ".join({"wenz": "Wenz"}.get(n, n) for n in noise) + " noise"
@@ -351,17 +364,19 @@ def condition(rows: list[dict[str, Any]]) -> str:
     episodes = _values(rows, "episodes")
     span = str(episodes[0]) if len(episodes) == 1 else f"{episodes[0]}-{episodes[-1]}"
     parts.append(f"{span} episodes per cell")
-    return ", ".join(parts)
+    channel = channel_text(rows)
+    return ", ".join(parts) + (f";\n{channel}" if channel else "")
 
 
 def condition_suffix(rows: list[dict[str, Any]]) -> str:
-    """The figure file names' suffix: "_flat", "_wenz" (and "_current" with a current), or ""
-    when the rows do not record the noise model."""
+    """The figure file names' suffix: "_flat", "_wenz" (and "_current" with a current; "" when
+    the rows do not record the noise model), then "_channel" when a row's acoustic channel is
+    not the paper's."""
     noise = _values(rows, "noise_model")
-    if not noise:
-        return ""
     current = max(_values(rows, "max_current_mps") or [0.0]) > 0
-    return "_" + "-".join(noise) + ("_current" if current else "")
+    tail = "_" + "-".join(noise) + ("_current" if current else "") if noise else ""
+    channels = {str(c) for c in _values(rows, "channel")} - {PAPER_CHANNEL}
+    return tail + ("_channel" if channels else "")
 
 
 def vs_k_figure(
