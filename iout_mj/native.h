@@ -236,6 +236,12 @@ IOUT_API int64_t iout_serve_channel(const Network *net, int64_t e, int64_t n_env
 IOUT_API int64_t iout_francois_garrison(const double *f_khz, int64_t count,
                                         double temperature_degc, double salinity_ppt,
                                         double depth_m, double ph, double *alpha_db_per_km);
+IOUT_API int64_t iout_tl_interpolate(const double *range_m, int64_t n_range,
+                                    const double *depth_m, int64_t n_depth, const double *tl_db,
+                                    const double *at_range_m, const double *at_depth_m,
+                                    int64_t count, double *out_db);
+double iout_tl_at(const double *range_m, int64_t n_range, const double *depth_m, int64_t n_depth,
+                  const double *tl_db, double range, double depth);
 IOUT_API int64_t iout_packet_error_rates(const Channel *ch, const double *sinr, int64_t count,
                                          double *per);
 void iout_link_energy(const Link *link, double distance_m, double *harvest_j, double *uplink_j);

@@ -74,6 +74,7 @@ _SIGNATURES: dict[str, list[Any]] = {
     "iout_serve": [P, I64, I64, I64, I64, P, I64, F64, P, P, P, I64, P, P, P, P, P, P, P],
     "iout_serve_channel": [P, I64, I64, I64, I64, P, P, I64, F64, *[P] * 13],
     "iout_packet_error_rates": [P, P, I64, P],
+    "iout_tl_interpolate": [P, I64, P, I64, P, P, P, I64, P],
     "iout_francois_garrison": [P, I64, F64, F64, F64, F64, P],
     "iout_begin_slot": [P],
     "iout_end_slot": [P],

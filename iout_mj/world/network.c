@@ -101,6 +101,58 @@ int64_t iout_francois_garrison(const double *f_khz, int64_t count, double temper
     return IOUT_OK;
 }
 
+/* ------------------------------------------------------------------ site-specific TL */
+/* The cell of `x` on the strictly increasing axis[0..count) and its weight on the upper node:
+ * x clamped to [axis[0], axis[count - 1]] (a one-node axis is constant). */
+static int64_t axis_cell(const double *axis, int64_t count, double x, double *weight)
+{
+    *weight = 0.0;
+    if (count < 2 || x <= axis[0])
+        return 0;
+    if (x >= axis[count - 1]) {
+        *weight = 1.0;
+        return count - 2;
+    }
+    int64_t lo = 0, hi = count - 1; /* axis[lo] <= x < axis[hi] */
+    while (hi - lo > 1) {
+        int64_t mid = (lo + hi) / 2;
+        if (axis[mid] <= x)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    *weight = (x - axis[lo]) / (axis[lo + 1] - axis[lo]);
+    return lo;
+}
+
+/* Bilinear interpolation of tl_db (depth-major: tl_db[d * n_range + r]) at (range, depth),
+ * clamped to the table's edges (world.tl_table states the table). */
+double iout_tl_at(const double *range_m, int64_t n_range, const double *depth_m, int64_t n_depth,
+                  const double *tl_db, double range, double depth)
+{
+    double wr, wd;
+    int64_t r = axis_cell(range_m, n_range, range, &wr);
+    int64_t d = axis_cell(depth_m, n_depth, depth, &wd);
+    int64_t r1 = n_range > 1 ? r + 1 : r, d1 = n_depth > 1 ? d + 1 : d;
+    double top = (1.0 - wr) * tl_db[d * n_range + r] + wr * tl_db[d * n_range + r1];
+    double bottom = (1.0 - wr) * tl_db[d1 * n_range + r] + wr * tl_db[d1 * n_range + r1];
+    return (1.0 - wd) * top + wd * bottom;
+}
+
+int64_t iout_tl_interpolate(const double *range_m, int64_t n_range, const double *depth_m,
+                            int64_t n_depth, const double *tl_db, const double *at_range_m,
+                            const double *at_depth_m, int64_t count, double *out_db)
+{
+    if (n_range < 1 || n_depth < 1 || count < 0)
+        return iout_fail("iout_tl_interpolate: a %lld x %lld table at %lld points; accepted at "
+                         "least one range and one depth", (long long)n_depth,
+                         (long long)n_range, (long long)count);
+    for (int64_t i = 0; i < count; i++)
+        out_db[i] = iout_tl_at(range_m, n_range, depth_m, n_depth, tl_db, at_range_m[i],
+                               at_depth_m[i]);
+    return IOUT_OK;
+}
+
 /* ------------------------------------------------------------------ the channel's rules */
 /* Bit error rate in AWGN at Eb/N0 (linear), Proakis, Digital Communications (5th ed.):
  * coherent BPSK 0.5 erfc(sqrt(Eb/N0)) (eq. 4.3-13); non-coherent binary FSK
