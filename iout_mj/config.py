@@ -683,16 +683,17 @@ class Config:
         )
 
     @classmethod
-    def from_dict(cls, data: Any) -> Config:
-        """A config from plain data; `physics.vehicle` fills the motion values the vehicle
-        implies that `data` does not set."""
+    def from_dict(cls, data: Any, name: str = "config") -> Config:
+        """A config from plain data (`name`: where it stands, for messages); `physics.vehicle`
+        fills the motion values the vehicle implies that `data` does not set. Every config
+        read as a section of another (a training config's `env:`) is built here too."""
         physics = data.get("physics") if isinstance(data, dict) else None
-        name = physics.get("vehicle") if isinstance(physics, dict) else None
-        if isinstance(name, str) and name in vehicles.VEHICLES:
+        vehicle = physics.get("vehicle") if isinstance(physics, dict) else None
+        if isinstance(vehicle, str) and vehicle in vehicles.VEHICLES:
             motion = data.get("motion", {})
             if isinstance(motion, dict):
-                data = {**data, "motion": {**vehicles.get(name).motion, **motion}}
-        return build_dataclass(cls, _node_depths_apart(data), "config")
+                data = {**data, "motion": {**vehicles.get(vehicle).motion, **motion}}
+        return build_dataclass(cls, _node_depths_apart(data), name)
 
     @classmethod
     def load(cls, path: str | Path) -> Config:

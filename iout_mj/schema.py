@@ -117,29 +117,32 @@ def fraction(obj: Any, *names: str) -> None:
         require(math.isfinite(value) and 0 < value <= 1, name, value, "a number in (0, 1]")
 
 
-def _convert(tp: Any, value: Any, name: str) -> Any:
+def convert(tp: Any, value: Any, name: str) -> Any:
     """Check `value` against the annotation `tp` and convert lists to tuples."""
     origin = typing.get_origin(tp)
     if dataclasses.is_dataclass(tp):
+        from_dict = getattr(tp, "from_dict", None)  # a section that completes its own data
+        if from_dict is not None and isinstance(value, dict):
+            return from_dict(value, name)
         return build_dataclass(tp, value, name)
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"{name}={shown(value)} has the wrong type: accepted a list")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{name}[{i}]") for i, v in enumerate(value))
+            return tuple(convert(args[0], v, f"{name}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(
                 f"{name}={shown(value)} is invalid: accepted a list of {len(args)} values"
             )
         return tuple(
-            _convert(a, v, f"{name}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
+            convert(a, v, f"{name}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if origin in (typing.Union, types.UnionType):
         present = [a for a in typing.get_args(tp) if a is not type(None)]
         if len(present) != 1 or len(typing.get_args(tp)) != 2:
             raise ConfigError(f"{name}: only optional (X | None) unions are supported in configs")
-        return None if value is None else _convert(present[0], value, name)
+        return None if value is None else convert(present[0], value, name)
     if tp is float:
         if isinstance(value, str) and _is_number_text(value):
             raise ConfigError(
@@ -166,6 +169,18 @@ def _convert(tp: Any, value: Any, name: str) -> Any:
     raise ConfigError(f"{name}: unsupported field type {tp}")
 
 
+def check_types(config: Any) -> None:
+    """A config built in code is checked as one read from a file: every field against its
+    annotation (integers, numbers, strings, lists, sections), before any range check; lists
+    become tuples and mappings sections, as when read (`schema.build_dataclass`)."""
+    hints = typing.get_type_hints(type(config))
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        converted = convert(hints[f.name], value, f.name)
+        if converted is not value:
+            object.__setattr__(config, f.name, converted)  # frozen: set once, while built
+
+
 def build_dataclass(cls: Any, data: Any, name: str) -> Any:
     """An instance of the frozen dataclass `cls` from a mapping, checked key by key (unknown
     keys, wrong types and invalid values raise `ConfigError` naming the field)."""
@@ -178,7 +193,7 @@ def build_dataclass(cls: Any, data: Any, name: str) -> Any:
     unknown = sorted(shown(k) for k in set(data) - known)
     if unknown:
         raise ConfigError(f"{name}: unknown key(s) {unknown}; accepted keys {sorted(known)}")
-    kwargs = {k: _convert(hints[k], v, f"{name}.{k}") for k, v in data.items()}
+    kwargs = {k: convert(hints[k], v, f"{name}.{k}") for k, v in data.items()}
     try:
         return cls(**kwargs)
     except ConfigError as exc:  # a check of the dataclass: say where the field is

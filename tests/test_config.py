@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from iout_mj.config import PAPER_LAYOUTS, Config, MotionConfig, RewardWeights
 from iout_mj.experiments.ray_jobs import load_sweep
@@ -178,6 +179,21 @@ def test_every_shipped_config_loads():
         TrainConfig.load(path)
     load_sweep(CONFIGS / "sweep-smoke.yaml")
     assert load_mapping(CONFIGS / "rl-zoo3-ppo.yml", "rl-zoo3 file")
+
+
+def test_a_training_config_s_env_is_completed_as_an_env_config_file_is(tmp_path):
+    """`env: {physics: {vehicle: remus100}}` in a training config flies the REMUS at its own
+    V_max (it trained at the torpedo's 4 m/s before), and nodes with a z column give depths."""
+    env = {
+        "physics": {"vehicle": "remus100"},
+        "scenario": {"nodes_m": [[100.0, 200.0, 80.0], [300.0, 400.0, 90.0]]},
+    }
+    path = tmp_path / "t.yaml"
+    path.write_text(yaml.safe_dump({"name": "t", "n_auvs": 1, "env": env}))
+    train = TrainConfig.load(path)
+    assert train.env == Config.from_dict(env)
+    assert train.env.motion.v_max_mps == Config().with_vehicle("remus100").motion.v_max_mps < 4.0
+    assert train.env.channel.node_depths_m == (80.0, 90.0)
 
 
 def test_the_realistic_channel_training_config_trains_on_the_shipped_channel():

@@ -100,6 +100,9 @@ def test_step_after_the_end_and_bad_seeds():
     env = gym.make(ENV_ID, backend="kinematic", n_auvs=1, config={"scenario": {"horizon_slots": 1}})
     with pytest.raises(ValueError, match="seed=-1 is invalid"):
         gym.make(ENV_ID, backend="kinematic").reset(seed=-1)
+    for make in (lambda: gym.make(ENV_ID, backend="kinematic"), lambda: gym.make_vec(ENV_ID, 2)):
+        with pytest.raises(ValueError, match=r"seed=4294967296 is invalid: accepted an integer"):
+            make().reset(seed=2**32)
     env.reset(seed=0)
     *_, trunc, _ = env.step(np.array([5, 3, 0, 0]))
     assert trunc

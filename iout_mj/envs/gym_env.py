@@ -14,6 +14,7 @@ from iout_mj.backends.mujoco import vehicle
 from iout_mj.backends.mujoco.render import MissionRenderer
 from iout_mj.backends.mujoco.task import make_environment
 from iout_mj.backends.registry import SINGLE_ENV_BACKENDS
+from iout_mj.errors import require_seed
 from iout_mj.mission import OBS_HIGH, OBS_LOW, OBSERVATION_DOC, REWARD_TERMS, Mission
 from iout_mj.mission.observation import flatten_observation
 from iout_mj.scenarios import ConfigLike, NodesLike, resolve
@@ -143,10 +144,7 @@ class MultiAUVEnv(gym.Env[np.ndarray, np.ndarray], EzPickle):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        if seed is not None and (
-            isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0
-        ):
-            raise ValueError(f"seed={seed!r} is invalid: accepted an integer >= 0 or None")
+        seed = require_seed(seed, allow_none=True)
         super().reset(seed=seed)
         if seed is not None:
             target = self._env.task if self.backend == "mujoco" else self._env

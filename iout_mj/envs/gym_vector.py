@@ -21,6 +21,7 @@ from gymnasium.vector.utils import batch_space
 
 from iout_mj.envs.batch import MissionBatch
 from iout_mj.envs.gym_env import spaces
+from iout_mj.errors import require_seed
 from iout_mj.runtime import cpu_bounded
 from iout_mj.scenarios import ConfigLike
 
@@ -75,9 +76,7 @@ class MultiAUVVectorEnv(VectorEnv):
                 "seed: accepted one integer for the whole batch (it draws every environment's "
                 "episode from one RNG), or None"
             )
-        if seed is not None:
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-                raise ValueError(f"seed={seed!r} is invalid: accepted an integer >= 0 or None")
+        if require_seed(seed, allow_none=True) is not None:
             self.batch.random = np.random.RandomState(seed)
         self.batch.restart(None)
         self._needs_reset = False

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import re
-import typing
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -14,9 +13,9 @@ from iout_mj.config import MAX_NODES, MIN_NODES, Config
 from iout_mj.scenarios import EnvSpec, resolve
 from iout_mj.schema import (
     ConfigError,
-    _convert,
     build_dataclass,
     check_finite,
+    check_types,
     in_range,
     load_mapping,
     require,
@@ -35,18 +34,6 @@ a token observation of up to ~4 kB each, so it stays under ~1 GB."""
 MAX_ENVS = 1024
 MAX_LAYERS, MAX_WIDTH = 8, 2048
 """net_arch: at most 8 layers of 2048 (33M parameters, 0.4 GB with Adam's moments)."""
-
-
-def check_types(config: Any) -> None:
-    """A config built in code is checked as one read from a file: every field against its
-    annotation (integers, numbers, strings, lists, sections), before any range check; lists
-    become tuples and mappings sections, as when read (`schema.build_dataclass`)."""
-    hints = typing.get_type_hints(type(config))
-    for f in fields(config):
-        value = getattr(config, f.name)
-        converted = _convert(hints[f.name], value, f.name)
-        if converted is not value:
-            object.__setattr__(config, f.name, converted)  # frozen: set once, while built
 
 
 def require_node_range(node_range: tuple[int, int], alternative: str = "") -> None:
