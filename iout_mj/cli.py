@@ -158,8 +158,46 @@ def build_parser() -> argparse.ArgumentParser:
         help="AUV-node distances, metres (> 0)",
     )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
-    p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
+    p.add_argument(
+        "--config",
+        help="YAML/JSON config (default: the paper's values); with "
+        "channel.transmission_loss_file the table's TL at each horizontal distance and AUV depth",
+    )
     p.set_defaults(func="cmd_link_budget")
+
+    p = sub.add_parser(
+        "tl-table",
+        help="site-specific transmission-loss table by BELLHOP (needs the bellhop extra)",
+        description="Compute a transmission-loss table over horizontal range and AUV depth for "
+        "a node on the config's seabed (channel.node_depth_m), at the config's AET and data "
+        "frequencies, in a Mackenzie sound-speed profile of its channel temperature and "
+        "salinity (or --profile), by BELLHOP through the optional package pelagic "
+        "(`pip install -e .[bellhop]`); set the file as channel.transmission_loss_file.",
+        **fmt,
+    )
+    p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
+    p.add_argument(
+        "--profile", help="sound-speed profile CSV, 'depth_m, c_mps' rows from 0 m to the seabed"
+    )
+    p.add_argument(
+        "--max-range-m",
+        type=positive_distance,
+        help="last horizontal range, metres (default: the area's diagonal, rounded up to a step)",
+    )
+    p.add_argument(
+        "--range-step-m",
+        type=positive_distance,
+        default=10.0,
+        help="spacing of the horizontal ranges, metres",
+    )
+    p.add_argument(
+        "--depth-points",
+        type=int_between(2, 128, "the compiled link constants hold 128 depths"),
+        default=21,
+        help="AUV depths from 1 m to the source, evenly spaced",
+    )
+    p.add_argument("--out", required=True, help="the table file to write (.npz)")
+    p.set_defaults(func="cmd_tl_table")
 
     p = sub.add_parser(
         "validate-energy", help="cubic propulsion model vs MuJoCo actuator power", **fmt

@@ -33,7 +33,49 @@ def cmd_link_budget(args: argparse.Namespace) -> int:
     env = load_config(args.config)
     cfg, channel = env.acoustics, env.channel
     d = np.asarray(args.distance, dtype=float)
-    rows = [
+    table = channel.transmission_loss_file
+    rows = _formula_rows(cfg, channel, d) if table is None else _table_rows(env, d)
+    links = _channel_links(env, d) if channel.features else None
+    if args.json:
+        print(json.dumps(rows if links is None else {"link": rows, "channel": links}, indent=2))
+        return 0
+    print(
+        f"AET at {cfg.f_wet_khz:g} kHz, P_tx {cfg.p_tx_w:g} W; uplink at {cfg.f_data_khz:g} kHz,"
+        f" {cfg.data_rate_bps / 1e3:g} kbit/s over {cfg.bandwidth_hz:g} Hz; "
+        f"slot {cfg.charging_s:g} s; noise '{cfg.noise_model}'"
+        + ("" if channel.absorption == "thorp" else f"; absorption '{channel.absorption}'")
+        + ("" if table is None else f"; TL from the table {Path(table).name} (horizontal range)")
+    )
+    columns = BUDGET_COLUMNS if table is None else TABLE_COLUMNS
+    print(" ".join(f"{title.format(ac=cfg):>11}" for _, title, _ in columns))
+    for r in rows:
+        print(" ".join(f"{r[key]:>11{fmt}}" for key, _, fmt in columns))
+    if links is not None:
+        _print_channel_links(channel, links)
+    return 0
+
+
+BUDGET_COLUMNS = (
+    ("distance_m", "distance m", ".1f"),
+    ("harvest_power_w", "harvest W", ".4g"),
+    ("harvest_energy_j", "harvest J", ".4g"),
+    ("uplink_power_w", "uplink W", ".4g"),
+    ("uplink_energy_j", "uplink J", ".4g"),
+)
+"""The link table of `iout-mj link-budget`: key, heading, format."""
+TABLE_COLUMNS = (
+    BUDGET_COLUMNS[0],
+    ("auv_depth_m", "AUV z m", ".1f"),
+    ("tl_wet_db", "TL {ac.f_wet_khz:g} kHz", ".2f"),
+    ("tl_data_db", "TL {ac.f_data_khz:g} kHz", ".2f"),
+    *BUDGET_COLUMNS[1:],
+)
+"""The same with a transmission-loss table: the AUV's depth and the table's TL columns."""
+
+
+def _formula_rows(cfg: Any, channel: Any, d: np.ndarray) -> list[dict[str, float]]:
+    """The link budget at each distance: spreading and absorption (`world.acoustics`)."""
+    return [
         {
             "distance_m": float(di),
             "harvest_power_w": float(hp),
@@ -50,27 +92,69 @@ def cmd_link_budget(args: argparse.Namespace) -> int:
             strict=True,
         )
     ]
-    links = _channel_links(env, d) if channel.features else None
-    if args.json:
-        print(json.dumps(rows if links is None else {"link": rows, "channel": links}, indent=2))
-        return 0
+
+
+def _table_rows(env: Any, d: np.ndarray) -> list[dict[str, float]]:
+    """The compiled link budget with the channel's transmission-loss table at each horizontal
+    range and each distinct AUV depth of the config."""
+    cfg, channel = env.acoustics, env.channel
+    link = acoustics.LinkBudget(cfg, channel)
+    auv_m, node_m = channel.depths_m(env.scenario.n_auvs, env.scenario.n_nodes)
+    rows = []
+    for h in d:
+        for a in sorted(set(auv_m)):
+            (harvest,), (uplink,) = link.energies_j([h], a, node_m[0])
+            (wet,), (data,) = link.transmission_loss_db([h], a, node_m[0])
+            rows.append(
+                {
+                    "distance_m": float(h),
+                    "auv_depth_m": a,
+                    "tl_wet_db": float(wet),
+                    "tl_data_db": float(data),
+                    "harvest_power_w": float(harvest) / cfg.charging_s,
+                    "harvest_energy_j": float(harvest),
+                    "uplink_power_w": float(uplink) / cfg.data_s,
+                    "uplink_energy_j": float(uplink),
+                }
+            )
+    return rows
+
+
+def cmd_tl_table(args: argparse.Namespace) -> int:
+    from iout_mj.world import tl_table  # the compiled link budget, and pelagic when it runs
+
+    env = load_config(args.config)
+    if args.max_range_m is None:  # the area's diagonal, rounded up to a whole step
+        diagonal_m = float(np.hypot(*env.scenario.area_m))
+        max_range_m = args.range_step_m * np.ceil(diagonal_m / args.range_step_m)
+    else:
+        max_range_m = args.max_range_m
+    out = Path(args.out)
+    if out.suffix != ".npz":
+        raise UsageError(f"--out {out}: accepted a file name ending in .npz")
+    writable_dir(out.parent)
+    frequencies = (env.acoustics.f_wet_khz, env.acoustics.f_data_khz)
     print(
-        f"AET at {cfg.f_wet_khz:g} kHz, P_tx {cfg.p_tx_w:g} W; uplink at {cfg.f_data_khz:g} kHz,"
-        f" {cfg.data_rate_bps / 1e3:g} kbit/s over {cfg.bandwidth_hz:g} Hz; "
-        f"slot {cfg.charging_s:g} s; noise '{cfg.noise_model}'"
-        + ("" if channel.absorption == "thorp" else f"; absorption '{channel.absorption}'")
+        f"tl-table: BELLHOP at {frequencies[0]:g} and {frequencies[1]:g} kHz to "
+        f"{max_range_m:g} m every {args.range_step_m:g} m, seabed {env.channel.node_depth_m:g} m",
+        file=sys.stderr,
     )
+    table = tl_table.compute_table(
+        env.channel,
+        frequencies,
+        max_range_m=float(max_range_m),
+        range_step_m=args.range_step_m,
+        depth_points=args.depth_points,
+        profile_csv=None if args.profile is None else Path(args.profile),
+    )
+    tl_table.check_link_table(table, env.acoustics, env.channel)
+    tl_table.save_table(table, out)
     print(
-        f"{'distance m':>11} {'harvest W':>11} {'harvest J':>11} {'uplink W':>11} {'uplink J':>11}"
+        f"{out}: {table.frequency_khz.size} frequencies x {table.depth_m.size} depths "
+        f"({table.depth_m[0]:g} to {table.depth_m[-1]:g} m) x {table.range_m.size} ranges "
+        f"({table.range_m[0]:g} to {table.range_m[-1]:g} m), source at "
+        f"{table.source_depth_m:g} m; use it as channel.transmission_loss_file"
     )
-    for r in rows:
-        print(
-            f"{r['distance_m']:>11.1f} {r['harvest_power_w']:>11.4g} "
-            f"{r['harvest_energy_j']:>11.4g} {r['uplink_power_w']:>11.4g} "
-            f"{r['uplink_energy_j']:>11.4g}"
-        )
-    if links is not None:
-        _print_channel_links(channel, links)
     return 0
 
 

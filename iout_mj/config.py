@@ -252,6 +252,11 @@ class ChannelConfig:
     salinity_ppt, ph and the mean depth). Applies whatever `features` are on."""
     ph: float = 8.0
     """Sea water pH for 'francois-garrison' absorption (its boric acid term)."""
+    transmission_loss_file: str | None = None
+    """A site-specific transmission-loss table (.npz, `iout-mj tl-table`; a relative path in a
+    config file is taken from the file's folder): its TL at the horizontal range and the AUV's
+    depth stands for spreading and absorption in every link budget (AET and uplink). Needs
+    'depth' and 'thorp' absorption (the table holds its own); null: k_s 10 log10(d) + alpha d."""
 
     def __post_init__(self) -> None:
         check_finite(self)
@@ -291,6 +296,8 @@ class ChannelConfig:
         in_range(self, "shadowing_sigma_db", 0.0, 20.0)
         one_of(self, "absorption", ABSORPTION_MODELS)
         in_range(self, "ph", 7.7, 8.3, FRANCOIS_GARRISON_RANGE)
+        if self.transmission_loss_file is not None:
+            self._check_table_settings()
         if self.absorption == "francois-garrison":
             in_range(self, "temperature_degc", -2.0, 22.0, FRANCOIS_GARRISON_RANGE)
             in_range(self, "salinity_ppt", 30.0, 35.0, FRANCOIS_GARRISON_RANGE)
@@ -300,6 +307,29 @@ class ChannelConfig:
                 self.node_depths_m or self.node_depth_m,
                 f"depths whose mean_depth_m is at most 3500 m ({FRANCOIS_GARRISON_RANGE})",
             )
+
+    def _check_table_settings(self) -> None:
+        """What a transmission-loss table needs of the channel (its contents are checked
+        where a link budget loads it, `world.tl_table.link_values`)."""
+        path = self.transmission_loss_file
+        require(
+            isinstance(path, str) and path.endswith(".npz"),
+            "transmission_loss_file",
+            path,
+            "a path to an .npz table (`iout-mj tl-table`), or null",
+        )
+        require(
+            self.on("depth"),
+            "features",
+            self.features,
+            "'depth' among them with a transmission_loss_file (its TL is over the AUV's depth)",
+        )
+        require(
+            self.absorption == "thorp",
+            "absorption",
+            self.absorption,
+            "'thorp' with a transmission_loss_file (the table holds its own absorption)",
+        )
 
     @property
     def mean_depth_m(self) -> float:
@@ -324,9 +354,11 @@ class ChannelConfig:
     @property
     def label(self) -> str:
         """The channel in one word for result rows and figures: "paper" (no feature, Thorp),
-        else its features and a non-Thorp absorption joined by '+' ("depth+packets", ...)."""
+        else its features, a non-Thorp absorption and "tl-table" (with a transmission-loss
+        table) joined by '+' ("depth+packets", ...)."""
         extra = () if self.absorption == "thorp" else (self.absorption,)
-        return "+".join((*self.features, *extra)) or PAPER_CHANNEL
+        table = () if self.transmission_loss_file is None else ("tl-table",)
+        return "+".join((*self.features, *extra, *table)) or PAPER_CHANNEL
 
 
 PAPER_CHANNEL = "paper"
@@ -697,8 +729,19 @@ class Config:
 
     @classmethod
     def load(cls, path: str | Path) -> Config:
-        """Read a YAML or JSON file written by `save` (or by hand; missing keys take defaults)."""
-        return cls.from_dict(load_mapping(path, "config file"))
+        """Read a YAML or JSON file written by `save` (or by hand; missing keys take defaults);
+        relative file paths in it are taken from its folder (`_files_from`)."""
+        return cls.from_dict(_files_from(load_mapping(path, "config file"), Path(path).parent))
+
+
+def _files_from(data: Any, folder: Path) -> Any:
+    """Plain config data whose relative channel.transmission_loss_file is joined to `folder`
+    (the config file's); other data as it is."""
+    channel: Any = data.get("channel") if isinstance(data, dict) else None
+    path = channel.get("transmission_loss_file") if isinstance(channel, dict) else None
+    if not isinstance(path, str) or Path(path).is_absolute():
+        return data
+    return {**data, "channel": {**channel, "transmission_loss_file": str(folder / path)}}
 
 
 def _node_depths_apart(data: Any) -> Any:

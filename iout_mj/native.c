@@ -9,10 +9,12 @@
 #define VALUE(owner, type, name) {#owner, #name, #type, "value", offsetof(owner, name), sizeof(type)},
 #define POINTER(owner, type, name) {#owner, #name, #type, "pointer", offsetof(owner, name), sizeof(void *)},
 #define STRUCT(owner, type, name) {#owner, #name, #type, "struct", offsetof(owner, name), sizeof(type)},
+#define ARRAY(owner, type, name, count) {#owner, #name, #type, "array", offsetof(owner, name), sizeof(type) * (count)},
 #define SIZEOF(owner) {#owner, "", #owner, "sizeof", 0, sizeof(owner)},
 
 #define PARAMS_VALUE(type, name) VALUE(Params, type, name)
 #define LINK_VALUE(type, name) VALUE(Link, type, name)
+#define LINK_ARRAY(type, name, count) ARRAY(Link, type, name, count)
 #define CHANNEL_VALUE(type, name) VALUE(Channel, type, name)
 #define NETWORK_POINTER(type, name) POINTER(Network, type, name)
 #define STATE_POINTER(type, name) POINTER(State, type, name)
@@ -23,7 +25,7 @@
 
 static const IoutDecl DECLS[] = {
     IOUT_PARAMS(PARAMS_VALUE) SIZEOF(Params)
-    IOUT_LINK(LINK_VALUE) SIZEOF(Link)
+    IOUT_LINK(LINK_VALUE) IOUT_LINK_ARRAYS(LINK_ARRAY) SIZEOF(Link)
     IOUT_CHANNEL(CHANNEL_VALUE) SIZEOF(Channel)
     IOUT_NETWORK(NETWORK_POINTER) SIZEOF(Network)
     IOUT_STATE(STATE_POINTER) SIZEOF(State)

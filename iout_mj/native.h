@@ -39,10 +39,21 @@
     X(double, w_collision) X(double, w_dock_first_entry) X(double, w_dock_all)                  \
     X(double, w_deadline) X(double, w_undocked_at_end)
 
-/* Link: the link budget's distance-independent constants (world.acoustics.LinkBudget). */
+/* Link: the link budget's distance-independent constants (world.acoustics.LinkBudget), and a
+ * site-specific transmission-loss table (world.tl_table) that stands for spreading and
+ * absorption where tl_ranges > 0: TL in dB, depth-major (tl_*_db[d * tl_ranges + r]), at the
+ * AET (wet) and data frequencies, over tl_depths AUV depths and tl_ranges horizontal ranges.
+ * X(type, name) for values, X(type, name, count) for fixed-size arrays. */
+#define IOUT_TL_MAX_RANGES 2048
+#define IOUT_TL_MAX_DEPTHS 128
+#define IOUT_TL_MAX_CELLS 16384 /* depths x ranges of one frequency */
 #define IOUT_LINK(X)                                                                            \
     X(double, harvest_j) X(double, uplink_j) X(double, wet_per_m) X(double, data_per_m)         \
-    X(double, spreading) X(double, min_distance_m) X(double, bits_per_delivery)
+    X(double, spreading) X(double, min_distance_m) X(double, bits_per_delivery)                 \
+    X(int64_t, tl_ranges) X(int64_t, tl_depths)
+#define IOUT_LINK_ARRAYS(X)                                                                     \
+    X(double, tl_range_m, IOUT_TL_MAX_RANGES) X(double, tl_depth_m, IOUT_TL_MAX_DEPTHS)          \
+    X(double, tl_wet_db, IOUT_TL_MAX_CELLS) X(double, tl_data_db, IOUT_TL_MAX_CELLS)
 
 /* Channel: the acoustic network layer's constants (world.acoustics.ChannelConstants); every
  * feature off (enabled 0) is the paper's channel. Flags are 0 or 1; fading is Rician with
@@ -139,9 +150,10 @@ enum { IOUT_BPSK = 0, IOUT_BFSK = 1 };
 /* ----------------------------------------------------------------- the structs */
 #define IOUT_VALUE_FIELD(type, name) type name;
 #define IOUT_POINTER_FIELD(type, name) type *name;
+#define IOUT_ARRAY_FIELD(type, name, count) type name[count];
 
 typedef struct { IOUT_PARAMS(IOUT_VALUE_FIELD) } Params;
-typedef struct { IOUT_LINK(IOUT_VALUE_FIELD) } Link;
+typedef struct { IOUT_LINK(IOUT_VALUE_FIELD) IOUT_LINK_ARRAYS(IOUT_ARRAY_FIELD) } Link;
 typedef struct { IOUT_CHANNEL(IOUT_VALUE_FIELD) } Channel;
 typedef struct { IOUT_NETWORK(IOUT_POINTER_FIELD) } Network;
 typedef struct { IOUT_STATE(IOUT_POINTER_FIELD) } State;
@@ -187,8 +199,8 @@ typedef struct {
     const char *owner; /* struct name */
     const char *name;  /* field name; "" for the struct's own size */
     const char *type;  /* C element type ("double", "int64_t", "bool", a struct name) */
-    const char *kind;  /* "value", "pointer", "struct" or "sizeof" */
-    int64_t offset, size;
+    const char *kind;  /* "value", "array", "pointer", "struct" or "sizeof" */
+    int64_t offset, size; /* an array's size: of all its elements */
 } IoutDecl;
 
 typedef struct {
@@ -218,6 +230,9 @@ IOUT_API const char *iout_error(void);
 /* world/network.c */
 IOUT_API int64_t iout_link_energies(const Link *link, const double *distance_m, int64_t count,
                                     double *harvest_j, double *uplink_j);
+IOUT_API int64_t iout_link_pair_energies(const Link *link, const double *horizontal_m,
+                                         const double *auv_depth_m, const double *node_depth_m,
+                                         int64_t count, double *harvest_j, double *uplink_j);
 IOUT_API int64_t iout_summarise(const Network *net, int64_t n_envs, int64_t k);
 IOUT_API int64_t iout_serve(const Network *net, int64_t e, int64_t n_envs, int64_t n,
                             int64_t k, const Link *link, int64_t k_reset, double aoi_max,
@@ -244,7 +259,9 @@ double iout_tl_at(const double *range_m, int64_t n_range, const double *depth_m,
                   const double *tl_db, double range, double depth);
 IOUT_API int64_t iout_packet_error_rates(const Channel *ch, const double *sinr, int64_t count,
                                          double *per);
-void iout_link_energy(const Link *link, double distance_m, double *harvest_j, double *uplink_j);
+void iout_link_energy(const Link *link, double distance_m, double horizontal_m,
+                      double auv_depth_m, double *harvest_j, double *uplink_j);
+double iout_horizontal_m(const double *auv_xy, const double *node_xy);
 double iout_jain(const int64_t *counts, int64_t k);
 void iout_distances(const double *auv_xy, const double *auv_depth_m, int64_t n,
                     const double *nodes_m, const double *node_depth_m, int64_t k,

@@ -70,6 +70,7 @@ _SIGNATURES: dict[str, list[Any]] = {
     "iout_tokens": [P],
     "iout_terms": [P],
     "iout_link_energies": [P, P, I64, P, P],
+    "iout_link_pair_energies": [P, P, P, P, I64, P, P],
     "iout_summarise": [P, I64, I64],
     "iout_serve": [P, I64, I64, I64, I64, P, I64, F64, P, P, P, I64, P, P, P, P, P, P, P],
     "iout_serve_channel": [P, I64, I64, I64, I64, P, P, I64, F64, *[P] * 13],
@@ -112,9 +113,15 @@ class Decl(NamedTuple):
     type: str
     """C element type: 'double', 'int64_t', 'bool', or a struct name ('const ' dropped)."""
     kind: str
-    """'value', 'pointer' or 'struct'."""
+    """'value', 'array' (a fixed-size array of values), 'pointer' or 'struct'."""
     offset: int
     size: int
+    """Bytes (an array's: all its elements)."""
+
+    @property
+    def elements(self) -> int:
+        """Elements of an array field (1 for a value)."""
+        return self.size // ELEMENT_DTYPES[self.type].itemsize if self.kind == "array" else 1
 
 
 class _CDecl(ctypes.Structure):
@@ -215,16 +222,22 @@ ELEMENT_DTYPES = {
     "bool": np.dtype(bool),
     "_Bool": np.dtype(bool),  # what `bool` expands to before the table stringifies it
 }
-_CTYPES = {"double": ctypes.c_double, "int64_t": ctypes.c_int64}
+_CTYPES: dict[str, Any] = {"double": ctypes.c_double, "int64_t": ctypes.c_int64}
 
 
 def record_dtype(owner: str) -> np.dtype:
-    """The numpy record of a struct of values (Params, Link), at the library's offsets."""
+    """The numpy record of a struct of values and fixed-size arrays (Params, Link), at the
+    library's offsets."""
     fields = FIELDS[owner]
     return np.dtype(
         {
             "names": [f.name for f in fields],
-            "formats": [ELEMENT_DTYPES[f.type] for f in fields],
+            "formats": [
+                (ELEMENT_DTYPES[f.type], (f.elements,))
+                if f.kind == "array"
+                else ELEMENT_DTYPES[f.type]
+                for f in fields
+            ],
             "offsets": [f.offset for f in fields],
             "itemsize": SIZES[owner],
         }
@@ -245,6 +258,8 @@ def struct_type(owner: str) -> type[ctypes.Structure]:
             members.append((f.name, P))
         elif f.kind == "struct":
             members.append((f.name, struct_type(f.type)))
+        elif f.kind == "array":
+            members.append((f.name, _CTYPES[f.type] * f.elements))
         else:
             members.append((f.name, _CTYPES[f.type]))
     struct: type[ctypes.Structure] = type(owner, (ctypes.Structure,), {"_fields_": members})

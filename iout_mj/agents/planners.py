@@ -26,7 +26,6 @@ from iout_mj.agents.baselines import (
 )
 from iout_mj.mission import Mission
 from iout_mj.types import BoolArray, FloatArray, IntArray
-from iout_mj.world import acoustics
 from iout_mj.world.geometry import pairwise_distance_m, wrap_angle
 
 CHARGED_J = 1.0
@@ -66,8 +65,7 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
     net, cfg = mission.network, mission.cfg
     k_reset, a_max = cfg.network.k_reset, cfg.network.aoi_max
     n = mission.n_auvs
-    d = pairwise_distance_m(positions_m, net.nodes_m)
-    req = acoustics.uplink_energy_j(d, cfg.acoustics, cfg.channel)
+    _, req = mission.link_energies_j(positions_m)
     can = net.energy_j[None, :] >= UPLINK_MARGIN * req  # (N, K)
     # With the channel's interference, uplinks of one slot drown each other (a node's power
     # gives SNR = gamma_req, 36 dB, at its AUV; a second node at a like range leaves SINR near

@@ -33,7 +33,9 @@ from iout_mj.mission.state import MissionLog, MissionState
 from iout_mj.mission.tokens import ETA_CRUISE_MPS, K_MAX, token_size
 from iout_mj.scenarios import random_layout
 from iout_mj.types import BoolArray, FloatArray
+from iout_mj.world.geometry import pairwise_distance_m
 from iout_mj.world.network import SensorNetwork, rows
+from iout_mj.world.tl_table import TLTableError
 
 
 def channel_draws_per_auv(n_auvs: int) -> int:
@@ -93,10 +95,39 @@ class Mission(native.Frozen):
         """(N,) each AUV's depth in the link budgets (zeros with the channel's depth off)."""
         self.node_depth_m = native.read_only(constant(node_m))
         """(K,) each node's seabed depth in the link budgets (zeros with depth off)."""
+        self._check_table_reach()
         self.term_values = native.allocate((*(self.batch or (1,)), len(REWARD_TERMS)), float)
         """The last slot's reward terms, (B, terms) in the order of REWARD_TERMS."""
         self._bind()
         self._freeze()
+
+    def _check_table_reach(self) -> None:
+        """Refuse a transmission-loss table that ends short of the area's diagonal (beyond its
+        last range it would hold the last TL)."""
+        link = self.network.link
+        if not link.has_table:
+            return
+        c = link.constants[0]
+        last_m, diagonal_m = (
+            float(c["tl_range_m"][c["tl_ranges"] - 1]),
+            float(np.hypot(*self.area_m)),
+        )
+        if last_m < diagonal_m:
+            raise TLTableError(
+                f"transmission_loss_file {self.cfg.channel.transmission_loss_file} reaches "
+                f"{last_m:g} m, short of the area's diagonal ({diagonal_m:.1f} m): accepted a "
+                "table over every horizontal range in the area (`iout-mj tl-table "
+                "--max-range-m`)"
+            )
+
+    def link_energies_j(self, positions_m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(harvest per charging period, uplink E_req), (*batch, N, K), of AUVs at
+        `positions_m` (*batch, N, 2) with the nodes, at the mission's depths: the compiled link
+        budget the slot rules apply (slant ranges, or the transmission-loss table)."""
+        horizontal = pairwise_distance_m(positions_m, self.network.nodes_m)
+        return self.network.link.energies_j(
+            horizontal, self.auv_depth_m[:, None], self.node_depth_m[None, :]
+        )
 
     def _bind(self) -> None:
         """The rules' view of this mission: the arrays with a batch axis, the slot's buffers,

@@ -177,7 +177,7 @@ static float *token_node_energy(const TokenEnv *t, int64_t j, int64_t k_max, flo
 }
 
 /* Per AUV: distance / diagonal, bearing, and uplink affordability
- * log10(stored energy / E_req at that distance) / 3 in [-1, 2]. */
+ * log10(stored energy / E_req of that link) / 3 in [-1, 2]. */
 static float *token_node_auv_links(const TokenEnv *t, int64_t j, int64_t k_max, float *o)
 {
     const Mission *m = t->m;
@@ -186,7 +186,8 @@ static float *token_node_auv_links(const TokenEnv *t, int64_t j, int64_t k_max, 
     for (int64_t i = 0; i < m->n_auvs; i++) {
         const double *xy = auv_xy(t, i);
         double d = m->s.distance_m[(m->n_auvs * t->e + i) * m->n_nodes + j], harvest_j, need_j;
-        iout_link_energy(m->link, d, &harvest_j, &need_j);
+        iout_link_energy(m->link, d, iout_horizontal_m(xy, node), m->auv_depth_m[i], &harvest_j,
+                         &need_j);
         *o++ = (float)(d * m->p->inv_diag_per_m);
         o = bearing(node[0] - xy[0], node[1] - xy[1], heading_sp(t, i), o);
         *o++ = (float)fmax(-1.0, fmin(2.0, log10(stored_j / need_j) / 3.0));

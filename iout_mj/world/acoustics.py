@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike
 from iout_mj import native
 from iout_mj.config import AcousticsConfig, ChannelConfig
 from iout_mj.types import FloatArray
+from iout_mj.world import tl_table  # a module: tl_table uses this one's functions
 
 SL_REF_DB = 170.8
 """Source level of 1 W of acoustic power radiated omnidirectionally, dB re 1 uPa at 1 m."""
@@ -185,7 +186,10 @@ class LinkBudget(native.Frozen):
     harvest(d) = c_h d^-k_s 10^(-alpha_wet d / 10^4)
     uplink(d) = c_u d^k_s 10^(alpha_data d / 10^4)
 
-    with alpha of the channel's absorption model (Thorp without a channel).
+    with alpha of the channel's absorption model (Thorp without a channel). With the channel's
+    transmission_loss_file (`world.tl_table`), harvest = c_h 10^(-TL_wet / 10) and uplink =
+    c_u 10^(TL_data / 10), the table's TL interpolated at the horizontal range and the AUV's
+    depth (the compiled `iout_link_energy`, which every link budget of the rules calls).
     """
 
     def __init__(self, cfg: AcousticsConfig, channel: ChannelConfig | None = None):
@@ -211,6 +215,7 @@ class LinkBudget(native.Frozen):
             "spreading": cfg.spreading_factor,
             "min_distance_m": MIN_DISTANCE_M,
             "bits_per_delivery": bits_per_delivery(cfg),
+            **tl_table.link_values(cfg, channel),
         }
         native.require_names("Link", tuple(sorted(LINK_DTYPE.names or ())), tuple(sorted(values)))
         constants = native.allocate((1,), LINK_DTYPE)
@@ -220,20 +225,50 @@ class LinkBudget(native.Frozen):
         """(1,) record of LINK_DTYPE (read-only: the compiled rules read it)."""
         self._freeze()
 
-    def energies_j(self, distance_m: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """(harvested energy per slot, uplink energy E_req) at each distance (any shape), by
-        the compiled `iout_link_energies` that the slot rules use."""
-        d = np.ascontiguousarray(distance_m, dtype=float)
-        harvest, uplink = np.empty_like(d), np.empty_like(d)
+    @property
+    def has_table(self) -> bool:
+        """Whether a transmission-loss table stands for spreading and absorption."""
+        return bool(self.constants["tl_ranges"][0])
+
+    def energies_j(
+        self, horizontal_m: ArrayLike, auv_depth_m: ArrayLike = 0.0, node_depth_m: ArrayLike = 0.0
+    ) -> tuple[FloatArray, FloatArray]:
+        """(harvested energy per slot, uplink energy E_req) of links at horizontal ranges,
+        AUV depths and node depths (broadcast together; the slant range with the formula, the
+        range and the AUV's depth with a table), by the compiled link budget, the
+        function the slot rules use (`iout_link_pair_energies`)."""
+        shape = np.broadcast_shapes(
+            *(np.shape(x) for x in (horizontal_m, auv_depth_m, node_depth_m))
+        )
+        h, a, z = (
+            np.ascontiguousarray(x, dtype=float)
+            for x in np.broadcast_arrays(
+                np.asarray(horizontal_m, float),
+                np.asarray(auv_depth_m, float),
+                np.asarray(node_depth_m, float),
+            )
+        )
+        harvest, uplink = np.empty_like(h), np.empty_like(h)
         native.call(
-            native.lib.iout_link_energies,
+            native.lib.iout_link_pair_energies,
             native.address(self.constants),
-            native.address(d),
-            d.size,
+            native.address(h),
+            native.address(a),
+            native.address(z),
+            h.size,
             native.address(harvest),
             native.address(uplink),
         )
-        return harvest, uplink
+        return harvest.reshape(shape), uplink.reshape(shape)
+
+    def transmission_loss_db(
+        self, horizontal_m: ArrayLike, auv_depth_m: ArrayLike = 0.0, node_depth_m: ArrayLike = 0.0
+    ) -> tuple[FloatArray, FloatArray]:
+        """The TL (dB) at the AET and at the data frequency that `energies_j` applies: the
+        table's, or k_s 10 log10(d) + alpha d / 1000."""
+        harvest, uplink = self.energies_j(horizontal_m, auv_depth_m, node_depth_m)
+        c = self.constants[0]
+        return -10 * np.log10(harvest / c["harvest_j"]), 10 * np.log10(uplink / c["uplink_j"])
 
 
 def bits_per_delivery(cfg: AcousticsConfig) -> float:
@@ -347,7 +382,8 @@ def channel_link_budget(
     its slot and without fading (`world.network` states the rules): the slant range (with
     'depth'), the sound speed and one-way delay, the share of tau_data left to the data by the
     handshake (with 'propagation'), the node's E_req and what it pays for that window, the
-    AET harvest, the SNR at the AUV (the node's power makes it gamma_req = 2^(R/B) - 1; with no
+    AET harvest (both by the compiled link budget: a transmission-loss table where the channel
+    has one), the SNR at the AUV (the node's power makes it gamma_req = 2^(R/B) - 1; with no
     other uplink it is also the SINR), the PER at it (with 'packets'), the packets sent and
     those expected to arrive, and the bits expected per slot."""
     dz_m = node_depth_m - auv_depth_m if channel.on("depth") else 0.0
@@ -359,7 +395,10 @@ def channel_link_budget(
     constants = ChannelConstants(channel, cfg)
     per = float(np.ravel(constants.packet_error_rate(snr_db))[0]) if channel.on("packets") else 0.0
     sent = math.floor(cfg.data_rate_bps * window_s / channel.packet_bits)
-    need_j = float(uplink_energy_j(range_m, cfg, channel))
+    auv_m, node_m = (auv_depth_m, node_depth_m) if channel.on("depth") else (0.0, 0.0)
+    harvest_j, need_j = (
+        float(e) for e in LinkBudget(cfg, channel).energies_j(horizontal_m, auv_m, node_m)
+    )
     return {
         "horizontal_m": float(horizontal_m),
         "auv_depth_m": auv_depth_m if channel.on("depth") else 0.0,
@@ -368,7 +407,7 @@ def channel_link_budget(
         "sound_speed_mps": c_mps,
         "delay_s": range_m / c_mps,
         "usable_share": window_s / cfg.data_s,
-        "harvest_energy_j": float(harvest_energy_j(range_m, cfg, channel)),
+        "harvest_energy_j": harvest_j,
         "uplink_energy_j": need_j,
         "uplink_cost_j": need_j * window_s / cfg.data_s,
         "snr_db": snr_db,

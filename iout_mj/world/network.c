@@ -7,21 +7,66 @@
 
 #define INITIAL_AOI 1.0 /* world.network.INITIAL_AOI: an update resets the age to one slot */
 
-void iout_link_energy(const Link *link, double distance_m, double *harvest_j, double *uplink_j)
+/* The link energies of an AUV and a node: the harvest of one charging period and the uplink's
+ * E_req. With the link's TL table (tl_ranges > 0), harvest_j 10^(-TL_wet / 10) and uplink_j
+ * 10^(TL_data / 10) at the horizontal range and the AUV's depth; else spreading and absorption
+ * over the (slant) distance, the paper's formula. */
+void iout_link_energy(const Link *link, double distance_m, double horizontal_m,
+                      double auv_depth_m, double *harvest_j, double *uplink_j)
 {
+    if (link->tl_ranges > 0) {
+        double wet_db = iout_tl_at(link->tl_range_m, link->tl_ranges, link->tl_depth_m,
+                                   link->tl_depths, link->tl_wet_db, horizontal_m, auv_depth_m);
+        double data_db = iout_tl_at(link->tl_range_m, link->tl_ranges, link->tl_depth_m,
+                                    link->tl_depths, link->tl_data_db, horizontal_m, auv_depth_m);
+        *harvest_j = link->harvest_j * pow(10.0, -0.1 * wet_db);
+        *uplink_j = link->uplink_j * pow(10.0, 0.1 * data_db);
+        return;
+    }
     double d = fmax(distance_m, link->min_distance_m);
     double spread = pow(d, link->spreading);
     *harvest_j = link->harvest_j * exp(link->wet_per_m * d) / spread;
     *uplink_j = link->uplink_j * exp(link->data_per_m * d) * spread;
 }
 
+/* The horizontal range between an AUV and a node, (x, y) each. */
+double iout_horizontal_m(const double *auv_xy, const double *node_xy)
+{
+    return hypot(auv_xy[0] - node_xy[0], auv_xy[1] - node_xy[1]);
+}
+
+/* The slant range of a horizontal range and a depth difference, as iout_distances takes it. */
+static double slant_m(double horizontal_m, double dz_m)
+{
+    return dz_m == 0.0 ? horizontal_m : hypot(horizontal_m, dz_m);
+}
+
+/* The link energies at distances (no depths: the paper's plane), for a link without a table. */
 int64_t iout_link_energies(const Link *link, const double *distance_m, int64_t count,
                            double *harvest_j, double *uplink_j)
 {
     if (count < 0)
         return iout_fail("iout_link_energies: count %lld < 0", (long long)count);
+    if (link->tl_ranges > 0)
+        return iout_fail("iout_link_energies: the link has a transmission-loss table, over "
+                         "horizontal range and AUV depth; accepted through "
+                         "iout_link_pair_energies");
     for (int64_t i = 0; i < count; i++)
-        iout_link_energy(link, distance_m[i], &harvest_j[i], &uplink_j[i]);
+        iout_link_energy(link, distance_m[i], distance_m[i], 0.0, &harvest_j[i], &uplink_j[i]);
+    return IOUT_OK;
+}
+
+/* The link energies of pairs: horizontal ranges, AUV depths and node depths (count each). */
+int64_t iout_link_pair_energies(const Link *link, const double *horizontal_m,
+                                const double *auv_depth_m, const double *node_depth_m,
+                                int64_t count, double *harvest_j, double *uplink_j)
+{
+    if (count < 0)
+        return iout_fail("iout_link_pair_energies: count %lld < 0", (long long)count);
+    for (int64_t i = 0; i < count; i++) {
+        double d = slant_m(horizontal_m[i], node_depth_m[i] - auv_depth_m[i]);
+        iout_link_energy(link, d, horizontal_m[i], auv_depth_m[i], &harvest_j[i], &uplink_j[i]);
+    }
     return IOUT_OK;
 }
 
@@ -63,9 +108,9 @@ void iout_distances(const double *auv_xy, const double *auv_depth_m, int64_t n,
 {
     for (int64_t i = 0; i < n; i++)
         for (int64_t j = 0; j < k; j++) {
-            double d = hypot(auv_xy[2 * i] - nodes_m[2 * j], auv_xy[2 * i + 1] - nodes_m[2 * j + 1]);
+            double d = iout_horizontal_m(auv_xy + 2 * i, nodes_m + 2 * j);
             double dz = (node_depth_m ? node_depth_m[j] : 0.0) - (auv_depth_m ? auv_depth_m[i] : 0.0);
-            distance_m[i * k + j] = dz == 0.0 ? d : hypot(d, dz);
+            distance_m[i * k + j] = slant_m(d, dz);
         }
 }
 
@@ -223,18 +268,29 @@ static double link_gain(const Channel *ch, const double *u)
     return (re * re + im * im) * pow(10.0, ch->shadowing_sigma_db * z3 / 10.0);
 }
 
+/* The link energies of AUV i (auv_xy (n, 2), auv_depth_m (n,) or NULL: 0) and node j of
+ * `nodes` (k, 2), at their distance_m[i * k + j] (iout_link_energy). */
+static void pair_energy(const Link *link, const double *auv_xy, const double *auv_depth_m,
+                        const double *nodes, const double *distance_m, int64_t k, int64_t i,
+                        int64_t j, double *harvest_j, double *uplink_j)
+{
+    iout_link_energy(link, distance_m[i * k + j], iout_horizontal_m(auv_xy + 2 * i, nodes + 2 * j),
+                     auv_depth_m ? auv_depth_m[i] : 0.0, harvest_j, uplink_j);
+}
+
 /* Env e's uplinks through the channel (world/network.py states the rules). From the
  * requests (`request_j`, and `reference`: the nearest active AUV naming each node, whose
  * range sets its power; -1: none), which nodes can afford to transmit in the window the
  * handshake leaves (`paid_j`: what each pays), their SINR at the AUVs, the packets that
  * arrive, `delivered` and the delivered bits. Scales `uplink_req_j` to the window. */
 static void serve_channel(const Network *net, int64_t e, int64_t n, int64_t k, const Link *link,
-                          const Channel *ch, const int64_t *data, int64_t node_stride,
+                          const Channel *ch, const double *auv_xy, const double *auv_depth_m,
+                          const int64_t *data, int64_t node_stride,
                           const bool *active, const double *distance_m, const double *request_j,
                           const int64_t *reference, double *uplink_req_j, double *paid_j,
                           bool *delivered, const LinkOutcomes *out)
 {
-    const double *energy = net->energy_j + e * k;
+    const double *energy = net->energy_j + e * k, *nodes = net->nodes_m + e * k * 2;
     double *bits = net->node_bits + e * k;
     int64_t row = IOUT_CHANNEL_DRAWS(n), sent[k], received[k];
     double usable_s[k], success[k]; /* success: 1 - prod of the receiving AUVs' PER */
@@ -267,7 +323,7 @@ static void serve_channel(const Network *net, int64_t e, int64_t n, int64_t k, c
             if (paid_j[m] == 0.0 || (m != j && !ch->interference))
                 continue;
             double harvest, need;
-            iout_link_energy(link, distance_m[i * k + m], &harvest, &need);
+            pair_energy(link, auv_xy, auv_depth_m, nodes, distance_m, k, i, m, &harvest, &need);
             double power = ch->snr_req * (request_j[m] / need) * link_gain(ch, u + 4 * reference[m]);
             if (m == j)
                 signal = power;
@@ -325,7 +381,7 @@ void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const L
             if (j != up && j != charge)
                 continue;
             double harvest, need;
-            iout_link_energy(link, distance_m[i * k + j], &harvest, &need);
+            pair_energy(link, auv_xy, auv_depth_m, nodes, distance_m, k, i, j, &harvest, &need);
             if (j == up) {
                 uplink_req_j[i] = need;
                 uplink_stored_j[i] = energy[j];
@@ -339,8 +395,8 @@ void iout_serve_env(const Network *net, int64_t e, int64_t n, int64_t k, const L
         }
     }
     if (ch->enabled) {
-        serve_channel(net, e, n, k, link, ch, data, node_stride, active, distance_m, request_j,
-                      reference, uplink_req_j, paid_j, delivered, out);
+        serve_channel(net, e, n, k, link, ch, auv_xy, auv_depth_m, data, node_stride, active,
+                      distance_m, request_j, reference, uplink_req_j, paid_j, delivered, out);
     } else { /* the paper's: delivered when the energy stored at the start covers E_req */
         for (int64_t j = 0; j < k; j++) {
             delivered[j] = energy[j] >= request_j[j];

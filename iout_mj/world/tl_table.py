@@ -20,6 +20,7 @@ Computational Ocean Acoustics, 2nd ed. 2011, Table 1.3).
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import math
 from collections.abc import Sequence
@@ -31,11 +32,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from iout_mj import native
-from iout_mj.config import ChannelConfig
+from iout_mj.config import AcousticsConfig, ChannelConfig
 from iout_mj.errors import IoutError
 from iout_mj.files import write_atomic
 from iout_mj.types import FloatArray
-from iout_mj.world.acoustics import mackenzie_sound_speed_mps
+from iout_mj.world import acoustics  # a module: acoustics.LinkBudget loads tables from here
 
 TABLE_ARRAYS = ("frequency_khz", "depth_m", "range_m", "tl_db", "source_depth_m")
 """The arrays of a table file, and nothing else."""
@@ -160,6 +161,110 @@ def load_table(path: Path) -> TLTable:
         raise TLTableError(f"{path}: {exc}") from exc
 
 
+@functools.lru_cache(maxsize=8)
+def _load_cached(path: str, mtime_ns: int, size: int) -> TLTable:
+    return load_table(Path(path))
+
+
+def load_table_cached(path: str | Path) -> TLTable:
+    """`load_table`, read once per file version (its path, modification time and size): every
+    env of a run builds its link budget from the same file."""
+    try:
+        info = Path(path).stat()
+    except OSError as exc:
+        raise TLTableError(
+            f"transmission_loss_file {path}: cannot read it ({exc.strerror or exc}); accepted "
+            "an .npz table written by `iout-mj tl-table`"
+        ) from exc
+    return _load_cached(str(path), info.st_mtime_ns, info.st_size)
+
+
+DEPTH_TOLERANCE_M = 1e-3
+"""How far the table's source may sit from the nodes' (seabed - SEABED_CLEARANCE_M)."""
+LINK_TABLE_FIELDS = ("tl_range_m", "tl_depth_m", "tl_wet_db", "tl_data_db")
+"""The Link record's table arrays (native.h's IOUT_LINK_ARRAYS)."""
+
+
+def link_bounds() -> dict[str, int]:
+    """The compiled link constants' room for a table: ranges, depths and cells (depths x
+    ranges) of one frequency (native.h's IOUT_TL_MAX_*)."""
+    shapes = {f: acoustics.LINK_DTYPE[f].shape[0] for f in LINK_TABLE_FIELDS}
+    return {
+        "ranges": shapes["tl_range_m"],
+        "depths": shapes["tl_depth_m"],
+        "cells": shapes["tl_wet_db"],
+    }
+
+
+def check_link_table(table: TLTable, cfg: AcousticsConfig, channel: ChannelConfig) -> None:
+    """Refuse a table the link budget cannot use: larger than the compiled link constants,
+    without the AET or data frequency, its source not at the nodes' depth, or AUV depths
+    outside its depth axis (TLTableError naming what is accepted)."""
+    bounds = link_bounds()
+    d, r = table.depth_m.size, table.range_m.size
+    if d > bounds["depths"] or r > bounds["ranges"] or d * r > bounds["cells"]:
+        raise TLTableError(
+            f"a table of {d} depths x {r} ranges: accepted at most {bounds['depths']} depths, "
+            f"{bounds['ranges']} ranges and {bounds['cells']} depths x ranges (a coarser "
+            "`iout-mj tl-table --range-step-m`)"
+        )
+    for name in ("f_wet_khz", "f_data_khz"):
+        f = getattr(cfg, name)
+        if not np.any(np.abs(table.frequency_khz - f) <= 1e-3):
+            raise TLTableError(
+                f"acoustics.{name} is {f:g} kHz, not in the table: accepted a table holding "
+                f"both link frequencies (it holds {table.frequency_khz.tolist()} kHz)"
+            )
+    auv_m = channel.auv_depths_m or (channel.auv_depth_m,)
+    seabeds = sorted(set(channel.node_depths_m or (channel.node_depth_m,)))
+    source = table.source_depth_m + SEABED_CLEARANCE_M
+    if any(abs(z - source) > DEPTH_TOLERANCE_M for z in seabeds):
+        raise TLTableError(
+            f"the table's source (a node) lies at {table.source_depth_m:g} m, for a seabed at "
+            f"{source:g} m; the channel's nodes lie on seabeds at {seabeds} m: accepted a "
+            f"table made for them (`iout-mj tl-table` puts the source "
+            f"{SEABED_CLEARANCE_M:g} m above the seabed of channel.node_depth_m)"
+        )
+    top, bottom = float(table.depth_m[0]), float(table.depth_m[-1])
+    outside = sorted({z for z in auv_m if not top <= z <= bottom})
+    if outside:
+        raise TLTableError(
+            f"AUV depths {outside} m lie outside the table's depths: accepted AUV depths from "
+            f"{top:g} to {bottom:g} m"
+        )
+
+
+def link_values(cfg: AcousticsConfig, channel: ChannelConfig | None) -> dict[str, Any]:
+    """The Link record's table fields: the channel's transmission_loss_file, checked
+    (`check_link_table`), at the AET and data frequencies; none (tl_ranges 0: spreading and
+    absorption) without one."""
+    none = {"tl_ranges": 0, "tl_depths": 0, **{f: 0.0 for f in LINK_TABLE_FIELDS}}
+    if channel is None or channel.transmission_loss_file is None:
+        return none
+    path = channel.transmission_loss_file
+    table = load_table_cached(path)
+    try:
+        check_link_table(table, cfg, channel)
+    except TLTableError as exc:
+        raise TLTableError(f"transmission_loss_file {path}: {exc}") from exc
+    cells = table.depth_m.size * table.range_m.size
+    values: dict[str, Any] = {
+        "tl_ranges": table.range_m.size,
+        "tl_depths": table.depth_m.size,
+        "tl_range_m": _padded(table.range_m, link_bounds()["ranges"]),
+        "tl_depth_m": _padded(table.depth_m, link_bounds()["depths"]),
+    }
+    for name, f in (("tl_wet_db", cfg.f_wet_khz), ("tl_data_db", cfg.f_data_khz)):
+        values[name] = _padded(table.band(f).reshape(cells), link_bounds()["cells"])
+    return values
+
+
+def _padded(values: FloatArray, size: int) -> FloatArray:
+    out = np.zeros(size)
+    out[: values.size] = values
+    return out
+
+
 def read_profile(path: Path) -> tuple[FloatArray, FloatArray]:
     """A sound-speed profile CSV: one 'depth_m, c_mps' per row (a header row is allowed),
     depths strictly increasing from the surface, speeds from 1400 to 1650 m/s."""
@@ -194,7 +299,7 @@ def mackenzie_profile(channel: ChannelConfig, seabed_m: float, points: int = 11)
     """[[depth, c], ...] from the surface to the seabed at the channel's temperature and
     salinity (Mackenzie 1981; isothermal, isohaline water)."""
     z = np.linspace(0.0, seabed_m, points)
-    c = mackenzie_sound_speed_mps(channel.temperature_degc, channel.salinity_ppt, z)
+    c = acoustics.mackenzie_sound_speed_mps(channel.temperature_degc, channel.salinity_ppt, z)
     return np.column_stack([z, c]).tolist()
 
 
