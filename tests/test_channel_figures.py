@@ -8,6 +8,7 @@ from test_figures import GRID
 
 from iout_mj.config import ChannelConfig
 from iout_mj.experiments import figures
+from iout_mj.experiments.evaluate import evaluate
 from iout_mj.scenarios import load_config
 
 REALISTIC = "depth+propagation+packets+interference+fading"
@@ -47,3 +48,10 @@ def test_the_papers_channel_keeps_the_file_names_and_says_so():
     assert figures.condition_suffix(mixed) == "_wenz_channel"
     assert figures.condition(mixed).endswith("channel: packets / the paper's channel")
     assert figures.condition_suffix(GRID) == "" and "channel" not in figures.condition(GRID)
+
+
+def test_evaluate_records_each_cell_s_channel_so_figures_can_name_it():
+    realistic = ROOT / "training/configs/env/realistic-channel.yaml"
+    for base, label in ((None, "paper"), (realistic, REALISTIC)):
+        eps, rows = evaluate(["greedy"], [2], [5], 1, 0, "kinematic", 1, False, base=base)
+        assert {r["channel"] for r in (*eps, *rows)} == {label}

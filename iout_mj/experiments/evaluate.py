@@ -102,6 +102,7 @@ def _episode(job: Job) -> dict[str, Any]:
         "backend": job.spec.backend,
         "noise_model": job.spec.config.acoustics.noise_model,
         "max_current_mps": job.spec.config.physics.max_current_mps,
+        "channel": job.spec.config.channel.label,
         **metrics,
     }
     if job.keep_trace:
@@ -276,6 +277,7 @@ def summarize(episodes: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "backend": backend,
             "noise_model": eps[0]["noise_model"],
             "max_current_mps": eps[0]["max_current_mps"],
+            "channel": eps[0]["channel"],
             "episodes": len(eps),
             "training_seeds": len({e.get("training_seed") for e in eps} - {None}),
         }
