@@ -39,7 +39,11 @@ from iout_mj.schema import ConfigError, load_mapping, require
 
 LAYOUTS = ("paper", "random")
 """Layouts a caller may ask for; "custom" is what a config's or a file's own nodes give."""
-ConfigLike: TypeAlias = "Config | EnvSpec | dict[str, Any] | str | Path | None"
+ConfigLike: TypeAlias = (
+    "Config | EnvSpec | dict[str, Any] | str | Path | Sequence[dict[str, Any] | str | Path] | None"
+)
+"""An env config: an object, plain data, a YAML/JSON file, several files or mappings combined
+(`combined_mapping`), or None (the paper's defaults)."""
 """What `config=` accepts everywhere: a Config, a dict, a YAML/JSON path, None (the paper's
 defaults), or an `EnvSpec` that `resolve` made."""
 NodesLike = Sequence[Point] | str | Path | None
@@ -149,7 +153,41 @@ def load_config(config: ConfigLike) -> Config:
         return Config.from_dict(config)
     if isinstance(config, (str, Path)):
         return Config.load(config)
-    raise ConfigError(f"config={config!r}: accepted a Config, a dict, a file path or None")
+    if isinstance(config, (list, tuple)):
+        return Config.from_dict(combined_mapping(config))
+    raise ConfigError(
+        f"config={config!r:.80}: accepted a Config, a dict, a file path, a list of files or "
+        "dicts, or None"
+    )
+
+
+def combined_mapping(configs: Sequence[Any]) -> dict[str, Any]:
+    """The plain data of several env configs (files or mappings) in order, a later one's keys
+    overriding an earlier one's section by section: `realistic-channel.yaml` then `wenz.yaml`
+    is the realistic channel with Wenz noise."""
+    merged: dict[str, Any] = {}
+    for i, config in enumerate(configs):
+        if isinstance(config, (str, Path)):
+            data = load_mapping(config, "config file")
+        elif isinstance(config, dict):
+            data = config
+        else:
+            raise ConfigError(
+                f"config[{i}]={config!r:.80}: accepted a file path or a dict in a list of configs"
+            )
+        merged = _overlay(merged, data)
+    return merged
+
+
+def _overlay(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    """`base` with `top`'s keys: mappings merged key by key, anything else replaced."""
+    out = dict(base)
+    for key, value in top.items():
+        below = out.get(key)
+        if isinstance(below, dict) and isinstance(value, dict):
+            value = _overlay(below, value)
+        out[key] = value
+    return out
 
 
 def fixed_config(n_auvs: int, n_nodes: int, base: ConfigLike = None) -> Config:
@@ -197,6 +235,8 @@ def _given(config: ConfigLike) -> tuple[Config, set[str]]:
         return Config.load(config), set(mapping.get("scenario") or {})
     if isinstance(config, dict):
         return Config.from_dict(config), set(config.get("scenario") or {})
+    if isinstance(config, (list, tuple)):
+        return _given(combined_mapping(config))
     cfg = load_config(config)
     default = ScenarioConfig()
     return cfg, {

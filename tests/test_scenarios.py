@@ -10,9 +10,10 @@ from conftest import ROOT
 
 import iout_mj
 from iout_mj.backends.registry import BACKENDS
+from iout_mj.config import Config
 from iout_mj.envs import ENV_ID, KinematicVecEnv
 from iout_mj.paper import PAPER_LAYOUTS
-from iout_mj.scenarios import EnvSpec, resolve
+from iout_mj.scenarios import EnvSpec, given_keys, load_config, resolve
 from iout_mj.schema import ConfigError, build_dataclass
 from iout_mj.training.config import TrainConfig
 
@@ -203,3 +204,19 @@ def test_every_registered_backend_steps_a_batch_of_the_same_scenario(backend):
     rewards, failed = batch.move(np.tile([5, 3, 0, 1] * 2, (2, 1)))
     assert np.isfinite(rewards).all() and not failed.any()
     assert (batch.mission.network.nodes_m == np.array(NODES)).all()
+
+
+def test_several_env_configs_combine_section_by_section_later_ones_winning(tmp_path):
+    realistic = ROOT / "training/configs/env/realistic-channel.yaml"
+    wenz = ROOT / "training/configs/env/wenz.yaml"
+    both = load_config([realistic, wenz])
+    assert both.channel == load_config(realistic).channel
+    assert both.acoustics == load_config(wenz).acoustics
+    flat = load_config([wenz, {"acoustics": {"noise_model": "flat"}}])
+    assert flat.acoustics.noise_model == "flat"
+    mine = {"scenario": {"n_auvs": 1}, "physics": {"vehicle": "remus100"}}
+    assert given_keys([realistic, mine]) == {"n_auvs"}
+    assert load_config([realistic, mine]).motion == Config().with_vehicle("remus100").motion
+    assert load_config([]) == Config()
+    with pytest.raises(ConfigError, match=r"config\[1\]=3: accepted a file path or a dict"):
+        load_config([wenz, 3])
