@@ -296,8 +296,7 @@ class ChannelConfig:
         in_range(self, "shadowing_sigma_db", 0.0, 20.0)
         one_of(self, "absorption", ABSORPTION_MODELS)
         in_range(self, "ph", 7.7, 8.3, FRANCOIS_GARRISON_RANGE)
-        if self.transmission_loss_file is not None:
-            self._check_table_settings()
+        self._check_table_settings()
         if self.absorption == "francois-garrison":
             in_range(self, "temperature_degc", -2.0, 22.0, FRANCOIS_GARRISON_RANGE)
             in_range(self, "salinity_ppt", 30.0, 35.0, FRANCOIS_GARRISON_RANGE)
@@ -313,19 +312,19 @@ class ChannelConfig:
         where a link budget loads it, `world.tl_table.link_values`)."""
         path = self.transmission_loss_file
         require(
-            isinstance(path, str) and path.endswith(".npz"),
+            path is None or path.endswith(".npz"),
             "transmission_loss_file",
             path,
             "a path to an .npz table (`iout-mj tl-table`), or null",
         )
         require(
-            self.on("depth"),
+            path is None or self.on("depth"),
             "features",
             self.features,
             "'depth' among them with a transmission_loss_file (its TL is over the AUV's depth)",
         )
         require(
-            self.absorption == "thorp",
+            path is None or self.absorption == "thorp",
             "absorption",
             self.absorption,
             "'thorp' with a transmission_loss_file (the table holds its own absorption)",
