@@ -729,11 +729,13 @@ class Config:
     @classmethod
     def load(cls, path: str | Path) -> Config:
         """Read a YAML or JSON file written by `save` (or by hand; missing keys take defaults);
-        relative file paths in it are taken from its folder (`_files_from`)."""
-        return cls.from_dict(_files_from(load_mapping(path, "config file"), Path(path).parent))
+        relative file paths in it are taken from its folder (`files_from_folder`)."""
+        return cls.from_dict(
+            files_from_folder(load_mapping(path, "config file"), Path(path).parent)
+        )
 
 
-def _files_from(data: Any, folder: Path) -> Any:
+def files_from_folder(data: Any, folder: Path) -> Any:
     """Plain config data whose relative channel.transmission_loss_file is joined to `folder`
     (the config file's); other data as it is."""
     channel: Any = data.get("channel") if isinstance(data, dict) else None
