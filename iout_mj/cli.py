@@ -74,6 +74,18 @@ def _policy_help() -> str:
     )
 
 
+def _config_option(p: argparse.ArgumentParser, what: str) -> None:
+    """`--config FILE`, repeatable: several env configs combine in order, a later file's keys
+    overriding an earlier one's section by section (`scenarios.combined_mapping`)."""
+    p.add_argument(
+        "--config",
+        action="append",
+        metavar="FILE",
+        help=f"{what}; repeat to combine files (later ones override earlier ones, section by "
+        "section)",
+    )
+
+
 def _trust_pickle(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--trust-pickle",
@@ -130,9 +142,9 @@ def _mission_arguments(p: argparse.ArgumentParser, width: int, height: int) -> N
     )
     p.add_argument("--layout", choices=LAYOUTS, default=None, help=LAYOUT_HELP)
     p.add_argument("--nodes-file", help=NODES_FILE_HELP)
-    p.add_argument(
-        "--config",
-        help="YAML/JSON env config (nodes, N, current, noise, reward, physics...); a flag that "
+    _config_option(
+        p,
+        "YAML/JSON env config (nodes, N, current, noise, reward, physics...); a flag that "
         "contradicts what it sets is an error",
     )
     _trust_pickle(p)
@@ -158,9 +170,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="AUV-node distances, metres (> 0)",
     )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
-    p.add_argument(
-        "--config",
-        help="YAML/JSON config (default: the paper's values); with "
+    _config_option(
+        p,
+        "YAML/JSON config (default: the paper's values); with "
         "channel.transmission_loss_file the table's TL at each horizontal distance and AUV depth",
     )
     p.set_defaults(func="cmd_link_budget")
@@ -175,7 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(`pip install -e .[bellhop]`); set the file as channel.transmission_loss_file.",
         **fmt,
     )
-    p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
+    _config_option(p, "YAML/JSON config (default: the paper's values)")
     p.add_argument(
         "--profile", help="sound-speed profile CSV, 'depth_m, c_mps' rows from 0 m to the seabed"
     )
@@ -204,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.add_argument("--out", default="renders", help="folder for energy_validation.png")
-    p.add_argument("--config", help="YAML/JSON config (default: the paper's values)")
+    _config_option(p, "YAML/JSON config (default: the paper's values)")
     p.add_argument(
         "--vehicle",
         choices=sorted(VEHICLES),
@@ -275,9 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="processes, at most one per CPU (default: one per CPU)",
     )
     p.add_argument("--layout", choices=LAYOUTS, default=None, help=LAYOUT_HELP)
-    p.add_argument(
-        "--config",
-        help="YAML/JSON env config (current, noise, reward, physics, and your own nodes or N, "
+    _config_option(
+        p,
+        "YAML/JSON env config (current, noise, reward, physics, and your own nodes or N, "
         "kept in every episode); a flag that contradicts what it sets is an error",
     )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
@@ -316,9 +328,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("train", help="PPO on a scenario (YAML config); checkpoints, resume", **fmt)
     p.add_argument("train_config", help="the training config, training/configs/<name>.yaml")
-    p.add_argument(
-        "--config",
-        help="YAML/JSON env config instead of the training config's env: (nodes, current, "
+    _config_option(
+        p,
+        "YAML/JSON env config instead of the training config's env: (nodes, current, "
         "noise, reward, ...)",
     )
     p.add_argument("--out", help="run folder (default: runs/<name>, runs/<name>-seed<S>)")
@@ -431,9 +443,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func="cmd_figures")
 
     p = sub.add_parser("config", help="the env config: every key, default, unit and range", **fmt)
-    p.add_argument(
-        "--config", help="a YAML/JSON env config to show whole (default: the paper's values)"
-    )
+    _config_option(p, "a YAML/JSON env config to show whole (default: the paper's values)")
     p.add_argument(
         "--markdown", action="store_true", help="the reference as Markdown (docs/config.md)"
     )

@@ -737,12 +737,14 @@ class Config:
 
 def files_from_folder(data: Any, folder: Path) -> Any:
     """Plain config data whose relative channel.transmission_loss_file is joined to `folder`
-    (the config file's); other data as it is."""
+    (the config file's) and made absolute, so that a run's saved config reads the same file
+    from its own folder; other data as it is."""
     channel: Any = data.get("channel") if isinstance(data, dict) else None
     path = channel.get("transmission_loss_file") if isinstance(channel, dict) else None
     if not isinstance(path, str) or Path(path).is_absolute():
         return data
-    return {**data, "channel": {**channel, "transmission_loss_file": str(folder / path)}}
+    absolute = str((folder / path).resolve())
+    return {**data, "channel": {**channel, "transmission_loss_file": absolute}}
 
 
 def _node_depths_apart(data: Any) -> Any:

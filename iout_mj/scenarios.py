@@ -33,6 +33,7 @@ from iout_mj.config import (
     Config,
     Point,
     ScenarioConfig,
+    files_from_folder,
 )
 from iout_mj.errors import require_integer, require_seed
 from iout_mj.schema import ConfigError, load_mapping, require
@@ -168,7 +169,7 @@ def combined_mapping(configs: Sequence[Any]) -> dict[str, Any]:
     merged: dict[str, Any] = {}
     for i, config in enumerate(configs):
         if isinstance(config, (str, Path)):
-            data = load_mapping(config, "config file")
+            data = files_from_folder(load_mapping(config, "config file"), Path(config).parent)
         elif isinstance(config, dict):
             data = config
         else:
@@ -231,8 +232,7 @@ def _given(config: ConfigLike) -> tuple[Config, set[str]]:
     """The config and the scenario keys its source sets itself (a Config object: those that
     differ from the defaults)."""
     if isinstance(config, (str, Path)):
-        mapping = load_mapping(config, "config file")
-        return Config.load(config), set(mapping.get("scenario") or {})
+        return _given(combined_mapping([config]))
     if isinstance(config, dict):
         return Config.from_dict(config), set(config.get("scenario") or {})
     if isinstance(config, (list, tuple)):
@@ -359,6 +359,8 @@ def resolve(
         if own is not None
         else f"config {config}"
         if isinstance(config, (str, Path))
+        else "config " + " + ".join(map(str, config))
+        if isinstance(config, (list, tuple)) and all(isinstance(c, (str, Path)) for c in config)
         else "the config"
     )
     if own is None and "nodes_m" in sets:

@@ -196,7 +196,11 @@ def test_config_file_paths_resolve_from_the_files_folder(tmp_path, table_file):
         "channel:\n  features: [depth]\n  transmission_loss_file: ../site.npz\n"
     )
     cfg = Config.load(folder / "site.yaml")
-    assert cfg.channel.transmission_loss_file == str(folder / "../site.npz")
+    assert cfg.channel.transmission_loss_file == str(tmp_path / "site.npz")
+    saved = tmp_path / "run" / "config.yaml"  # a run's copy reads the same table
+    saved.parent.mkdir()
+    cfg.save(saved)
+    assert Config.load(saved) == cfg
     assert acoustics.LinkBudget(cfg.acoustics, cfg.channel).has_table
 
 
@@ -302,12 +306,13 @@ def test_tl_table_command_names_the_extra_without_pelagic(tmp_path, capsys):
 
 
 SHIPPED = ROOT / "training/configs/env/realistic-channel-bellhop.yaml"
+"""An overlay: the realistic channel's file, then this one."""
 
 
 def test_the_shipped_bellhop_table_flies_a_mission():
     """The shipped realistic channel with BELLHOP's table: TL above the paper's practical
     spreading (k_s 1.5) and below spherical spreading, more at 70 kHz, and a mission runs."""
-    cfg = make_config(2, 7, base=load_config(SHIPPED))
+    cfg = make_config(2, 7, base=load_config([REALISTIC, SHIPPED]))
     link = acoustics.LinkBudget(cfg.acoustics, cfg.channel)
     ranges = np.array([100.0, 500.0, 1000.0])
     wet_db, data_db = link.transmission_loss_db(ranges, 50.0, 100.0)

@@ -393,3 +393,18 @@ def test_an_evaluation_of_more_than_max_episodes_is_refused_before_it_starts():
     with pytest.raises(UsageError, match=f"= {2 * MAX_EPISODES} episodes: accepted at most"):
         evaluate(["greedy", "planner"], [1], [7], MAX_EPISODES, 0, "kinematic", progress=False)
     assert time.perf_counter() - start < 10
+
+
+def test_config_repeats_and_combines_files_in_order():
+    """`--config A --config B`: B's keys override A's section by section (every command takes
+    it; `config` shows the result)."""
+    env = ROOT / "training" / "configs" / "env"
+    realistic, wenz = env / "realistic-channel.yaml", env / "wenz.yaml"
+    shown = run("config", "--config", realistic, "--config", wenz).stdout
+    assert 'noise_model: "wenz"' in shown
+    assert 'features: ["depth", "propagation", "packets", "interference", "fading"]' in shown
+    swapped = run("config", "--config", wenz, "--config", realistic).stdout
+    assert 'noise_model: "wenz"' in swapped  # the channel file does not set the noise
+    bellhop = env / "realistic-channel-bellhop.yaml"
+    budget = run("link-budget", "--config", realistic, "--config", bellhop).stdout
+    assert "TL from the table realistic-channel-bellhop.npz" in budget

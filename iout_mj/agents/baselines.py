@@ -13,7 +13,6 @@ import numpy as np
 
 from iout_mj.mission import Mission
 from iout_mj.types import BoolArray, FloatArray, IntArray
-from iout_mj.world import acoustics
 from iout_mj.world.geometry import pairwise_distance_m, wrap_angle
 
 NODE_REACHED_M = 60.0
@@ -191,7 +190,7 @@ class Planner:
         speed = np.where(near, 0.8, approach_speed(dist, mission.cfg.scenario.slot_s))
         h, s = steer(mission, targets, speed)
         h = np.where(near, mission.cfg.motion.heading_levels - 1, h)  # circle at the node
-        req = acoustics.uplink_energy_j(d, mission.cfg.acoustics, mission.cfg.channel)
+        _, req = mission.link_energies_j(mission.state.positions_m)  # the rules' own budget
         can = net.energy_j[None, :] >= req
         data = np.empty(n, dtype=np.int64)
         chosen: set[int] = set()

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from iout_mj.config import MAX_NODES, MIN_NODES, Config
+from iout_mj.config import MAX_NODES, MIN_NODES, Config, files_from_folder
 from iout_mj.scenarios import EnvSpec, resolve
 from iout_mj.schema import (
     ConfigError,
@@ -252,6 +252,8 @@ class TrainConfig:
     @classmethod
     def load(cls, path: str | Path) -> TrainConfig:
         data = load_mapping(path, "training config")
+        if isinstance(data.get("env"), dict):  # its relative file paths: from its folder
+            data = {**data, "env": files_from_folder(data["env"], Path(path).parent)}
         config: TrainConfig = build_dataclass(cls, data, Path(path).stem)
         return config
 
