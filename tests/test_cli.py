@@ -99,7 +99,7 @@ def test_unknown_policy_is_a_clear_error(tmp_path):
 
 
 @pytest.mark.slow
-def test_bench_quick_json_has_every_measure():
+def test_bench_quick_json_has_every_measure(tmp_path):
     r = json.loads(run("bench", "--quick", "--json").stdout)
     assert {"slot_vs_raw", "kinematic_steps_per_s", "ppo_fps_ratio", "subproc_scaling"} <= set(r)
     assert {"thread_scaling", "render_fps", "memory", "timestep_s", "substeps_per_slot"} <= set(r)
@@ -111,6 +111,11 @@ def test_bench_quick_json_has_every_measure():
     assert set(tokens) == {"kinematic", "mujoco", "trivial"} and min(tokens.values()) > 0
     assert r["token_ppo_ratio"] == pytest.approx(tokens["kinematic"] / tokens["trivial"])
     assert tokens["mujoco"] < tokens["kinematic"]  # the physics costs something
+    channel = r["kinematic_realistic_channel_steps_per_s"]
+    assert channel["N2_K13"] > channel["N2_K13_single_env"] > 0
+    saved = tmp_path / "bench.json"
+    saved.write_text(json.dumps(r))
+    assert "N2_K13 under the realistic channel" in run("bench", "--from-json", saved).stdout
 
 
 def test_bench_formats_the_saved_run_as_the_readme_table():

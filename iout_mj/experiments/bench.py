@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import platform
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -27,7 +28,7 @@ from iout_mj.experiments.bench_training import (
     token_ppo_fps,
 )
 from iout_mj.runtime import usable_cpus
-from iout_mj.scenarios import fixed_config
+from iout_mj.scenarios import ConfigLike, fixed_config
 from iout_mj.types import FloatArray
 
 
@@ -134,12 +135,19 @@ KINEMATIC_BATCH = 64
 """Environments per KinematicVecEnv call in the kinematic benchmark (and about what PPO uses)."""
 
 
-def kinematic_rate(n: int, k: int, steps: int = 3000) -> dict[str, float]:
+REALISTIC_CHANNEL = (
+    Path(__file__).resolve().parents[2] / "training/configs/env/realistic-channel.yaml"
+)
+"""The shipped realistic channel (a source checkout's), whose speed `run` measures too."""
+
+
+def kinematic_rate(n: int, k: int, steps: int = 3000, base: ConfigLike = None) -> dict[str, float]:
     """Kinematic env steps/s on one core: one env through `gymnasium.make` (its wrappers
     included), and a batch of `KINEMATIC_BATCH` envs through `KinematicVecEnv` (the backend PPO
-    trains on)."""
-    single = _env_rate(gym.make(ENV_ID, backend="kinematic", config=fixed_config(n, k)), steps)
-    venv = KinematicVecEnv(KINEMATIC_BATCH, config=fixed_config(n, k), seed=0)
+    trains on); `base`: the env config (default the paper's)."""
+    cfg = fixed_config(n, k, base)
+    single = _env_rate(gym.make(ENV_ID, backend="kinematic", config=cfg), steps)
+    venv = KinematicVecEnv(KINEMATIC_BATCH, config=cfg, seed=0)
     actions = _random_actions(venv.action_space, 16, (KINEMATIC_BATCH,))
     calls = max(steps // KINEMATIC_BATCH, 20)
 
@@ -214,6 +222,13 @@ def run_all(quick: bool = False, say: Callable[[str], None] = lambda _: None) ->
     result["kinematic_steps_per_s"] = {key: v[f"batch_{KINEMATIC_BATCH}"] for key, v in kin.items()}
     result["kinematic_single_env_steps_per_s"] = {key: v["single_env"] for key, v in kin.items()}
     result["kinematic_batch"] = KINEMATIC_BATCH
+    if REALISTIC_CHANNEL.is_file():  # a source checkout
+        say("kinematic steps/s under the realistic channel")
+        channel = kinematic_rate(2, 13, 300 if quick else 3000, REALISTIC_CHANNEL)
+        result["kinematic_realistic_channel_steps_per_s"] = {
+            "N2_K13": channel[f"batch_{KINEMATIC_BATCH}"],
+            "N2_K13_single_env": channel["single_env"],
+        }
     result["physics_batch"] = PHYSICS_BATCH
     n_envs, rollouts = (2, 1) if quick else (PHYSICS_BATCH, 2)
     fps = {}

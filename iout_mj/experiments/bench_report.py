@@ -11,6 +11,9 @@ RATES = ("env_steps_per_s", "raw_slots_per_s", "ratio")
 """Each scenario's slot_vs_raw entries (and the same with the batch prefix)."""
 TOKEN_PPO = ("kinematic", "mujoco", "trivial")
 """The general recipe's PPO steps/s entries."""
+CHANNEL = "kinematic_realistic_channel_steps_per_s"
+"""Steps/s under the shipped realistic channel (`bench.kinematic_rate`), N = 2, K = 13."""
+CHANNEL_KEYS = ("N2_K13", "N2_K13_single_env")
 
 
 def _token_ppo_lines(r: dict[str, Any]) -> list[tuple[str, str, str]]:
@@ -77,6 +80,9 @@ def check_result(r: Any, where: str = "the benchmark result") -> None:
         0.0,
     )
     numbers(r, ("ppo_fps_ratio", "subproc_scaling", "thread_scaling", "render_fps"), where, 0.0)
+    if CHANNEL in r:  # runs since the acoustic network layer's benchmark
+        channel = mapping(r[CHANNEL], f"{where}: {CHANNEL}")
+        numbers(channel, CHANNEL_KEYS, f"{where}: {CHANNEL}", 0.0)
     if "token_ppo_steps_per_s" in r:  # runs since the general recipe's benchmark
         numbers(
             mapping(r["token_ppo_steps_per_s"], f"{where}: token_ppo_steps_per_s"),
@@ -114,6 +120,12 @@ def format_table(r: dict[str, Any]) -> str:
     )
     for key, v in r["kinematic_steps_per_s"].items():
         lines.append(f"  {key:<7} {v:10.0f}   [{r['kinematic_single_env_steps_per_s'][key]:7.0f}]")
+    if CHANNEL in r:
+        c = r[CHANNEL]
+        lines.append(
+            f"  N2_K13 under the realistic channel {c['N2_K13']:10.0f}   "
+            f"[{c['N2_K13_single_env']:7.0f}; target >= 20000]"
+        )
     p = r["ppo_fps"]
     lines.append(
         f"ppo_fps_ratio {r['ppo_fps_ratio']:.3f} (physics {p['physics']:.0f} / trivial "
@@ -152,6 +164,13 @@ def format_markdown(r: dict[str, Any]) -> str:
         rows.append(
             f"| kinematic_steps_per_s {key}, KinematicVecEnv of {r['kinematic_batch']} "
             f"[one env, gym.make] | {v:,.0f} [{single[key]:,.0f}] | {target} |"
+        )
+    if CHANNEL in r:
+        c = r[CHANNEL]
+        rows.append(
+            f"| kinematic_steps_per_s N2_K13 under the realistic channel, KinematicVecEnv of "
+            f"{r['kinematic_batch']} [one env, gym.make] | {c['N2_K13']:,.0f} "
+            f"[{c['N2_K13_single_env']:,.0f}] | [>= 20,000] |"
         )
     p, mem = r["ppo_fps"], r["memory"]
     rows += [
