@@ -21,6 +21,7 @@ from iout_mj.schema import (
     ConfigError,
     build_dataclass,
     check_finite,
+    check_types,
     in_range,
     load_mapping,
     one_of,
@@ -86,6 +87,7 @@ class MotionConfig:
     battery_j: float = 2.0e6
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         in_range(
             self,
@@ -150,6 +152,7 @@ class AcousticsConfig:
     """Wenz model surface wind speed."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         for name in ("f_wet_khz", "f_data_khz"):
             in_range(self, name, 0.1, MAX_FREQUENCY_KHZ, FREQUENCY_WHY)
@@ -259,6 +262,7 @@ class ChannelConfig:
     'depth' and 'thorp' absorption (the table holds its own); null: k_s 10 log10(d) + alpha d."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         unknown = [f for f in self.features if f not in CHANNEL_FEATURES]
         require(
@@ -373,6 +377,7 @@ class NetworkConfig:
     node_initial_energy_j: float = 0.1
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         in_range(self, "k_reset", 1, MAX_HORIZON_SLOTS, "deliveries per AoI reset")
         in_range(self, "aoi_max", 1.0, 1e6, "slots")
@@ -414,6 +419,7 @@ class RewardWeights:
     as a reward term (the paper states it as a constraint; the value is ours)."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         for f in dataclasses.fields(self):
             in_range(self, f.name, -MAX_WEIGHT, MAX_WEIGHT)
@@ -439,6 +445,7 @@ class RewardConfig:
     """lambda_f of the objective P1 (not a reward weight; used for the reported objective)."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         in_range(self, "fairness_min_deliveries", 0, 1_000_000)
         for name in ("stall_distance_m", "safety_distance_m"):
@@ -471,6 +478,7 @@ class PhysicsConfig:
     values the vehicle implies (V_max, rho, C_d, S) that the file does not set itself."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         one_of(self, "vehicle", sorted(vehicles.VEHICLES))
         in_range(
@@ -523,6 +531,7 @@ class ScenarioConfig:
     start_heading_jitter_deg: float = 5.0
 
     def __post_init__(self) -> None:
+        check_types(self)
         check_finite(self)
         ax, ay = self.area_m
         require(
@@ -591,7 +600,8 @@ class Config:
     channel: ChannelConfig = field(default_factory=ChannelConfig)
 
     def __post_init__(self) -> None:
-        """Bounds that join sections."""
+        """Bounds that join sections (each section checked its own when built)."""
+        check_types(self)
         slot_s, m, ph = self.scenario.slot_s, self.motion, self.physics
         self._check_channel()
         for name in ("charging_s", "data_s"):

@@ -7,6 +7,7 @@ all of them report an unknown key, a wrong type or an invalid value the same way
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -169,11 +170,18 @@ def convert(tp: Any, value: Any, name: str) -> Any:
     raise ConfigError(f"{name}: unsupported field type {tp}")
 
 
+@functools.cache
+def field_types(cls: Any) -> dict[str, Any]:
+    """The resolved annotations of a dataclass (resolving them is the slow part of a check)."""
+    return typing.get_type_hints(cls)
+
+
 def check_types(config: Any) -> None:
     """A config built in code is checked as one read from a file: every field against its
     annotation (integers, numbers, strings, lists, sections), before any range check; lists
     become tuples and mappings sections, as when read (`schema.build_dataclass`)."""
-    hints = typing.get_type_hints(type(config))
+    cls: Any = type(config)
+    hints = field_types(cls)
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)
         converted = convert(hints[f.name], value, f.name)
@@ -188,7 +196,7 @@ def build_dataclass(cls: Any, data: Any, name: str) -> Any:
         return data
     if not isinstance(data, dict):
         raise ConfigError(f"{name}={shown(data)} has the wrong type: accepted a mapping")
-    hints = typing.get_type_hints(cls)
+    hints = field_types(cls)
     known = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(shown(k) for k in set(data) - known)
     if unknown:

@@ -12,6 +12,7 @@ from iout_mj.agents.registry import make_policy
 from iout_mj.agents.search import RolloutSearch
 from iout_mj.backends.kinematic import KinematicEnvironment
 from iout_mj.backends.mujoco.physics import AUVPhysics, Stepper
+from iout_mj.config import Config, MotionConfig, ScenarioConfig
 from iout_mj.envs import ENV_ID
 from iout_mj.errors import PolicyError, PolicyMismatchError, ResultFileError, UsageError
 from iout_mj.experiments import compare, evaluate, statistics
@@ -282,3 +283,23 @@ def test_training_configs_built_in_code_are_checked_as_files_are(build, match):
 def test_training_configs_built_in_code_take_lists_and_mappings_as_files_do():
     cfg = TrainConfig(phases=[{"backend": "kinematic", "timesteps": 5}], net_arch=[32])
     assert cfg.phases == (PhaseConfig("kinematic", 5),) and cfg.net_arch == (32,)
+
+
+@pytest.mark.parametrize(
+    ("build", "match"),
+    [
+        (lambda: ScenarioConfig(n_auvs=2.5), r"n_auvs=2.5 has the wrong type: accepted an integer"),
+        (lambda: ScenarioConfig(area_m="big"), r"area_m='big' has the wrong type: accepted a list"),
+        (lambda: MotionConfig(v_max_mps="4"), r"v_max_mps='4' was read as text"),
+        (lambda: Config(motion=4), r"motion=4 has the wrong type: accepted a mapping"),
+    ],
+)
+def test_config_sections_built_in_code_are_type_checked_as_files_are(build, match):
+    with pytest.raises(ConfigError, match=match):
+        build()
+
+
+def test_config_sections_built_in_code_convert_lists_as_files_do():
+    scenario = ScenarioConfig(area_m=[1000, 1200])
+    assert scenario.area_m == (1000.0, 1200.0) and isinstance(scenario.area_m, tuple)
+    assert Config(motion={"v_max_mps": 2.0}).motion == MotionConfig(v_max_mps=2.0)
