@@ -53,19 +53,24 @@ def test_scenarios_take_numpy_integers():
 
 # ------------------------------------------------------------------ agents
 @pytest.fixture(scope="module")
-def env_n2():
-    env = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=7)
-    env.reset(seed=0)
-    yield env
-    env.close()
+def envs():
+    """A reset kinematic env (K = 7) per N = 1, 2."""
+    made = {n: gym.make(ENV_ID, backend="kinematic", n_auvs=n, n_nodes=7) for n in (1, 2)}
+    for env in made.values():
+        env.reset(seed=0)
+    yield made
+    for env in made.values():
+        env.close()
 
 
 @pytest.fixture(scope="module")
-def env_n1():
-    env = gym.make(ENV_ID, backend="kinematic", n_auvs=1, n_nodes=7)
-    env.reset(seed=0)
-    yield env
-    env.close()
+def env_n1(envs):
+    return envs[1]
+
+
+@pytest.fixture(scope="module")
+def env_n2(envs):
+    return envs[2]
 
 
 def test_baselines_refuse_bad_names_and_seeds():
