@@ -36,6 +36,14 @@ MAX_LAYERS, MAX_WIDTH = 8, 2048
 """net_arch: at most 8 layers of 2048 (33M parameters, 0.4 GB with Adam's moments)."""
 
 
+def check_run_config(config: Any) -> None:
+    """A training config's shared checks: every field's type and finiteness, and a name that
+    can be a run folder's."""
+    check_types(config)
+    check_finite(config)
+    require(bool(NAME.fullmatch(config.name)), "name", config.name, "letters, digits, - _ .")
+
+
 def require_node_range(node_range: tuple[int, int], alternative: str = "") -> None:
     """A range of K: [low, high] within the nodes a config allows."""
     lo, hi = node_range
@@ -148,9 +156,7 @@ class TrainConfig:
     torch_threads: int = 1
 
     def __post_init__(self) -> None:
-        check_types(self)
-        check_finite(self)
-        require(bool(NAME.fullmatch(self.name)), "name", self.name, "letters, digits, - _ .")
+        check_run_config(self)
         self.env_spec  # noqa: B018 (resolves the scenario: a contradiction raises here)
         in_range(self, "n_envs", 1, MAX_ENVS)
         in_range(self, "n_steps", 1, MAX_ROLLOUT_STEPS)

@@ -74,12 +74,11 @@ from iout_mj.scenarios import resolve
 from iout_mj.schema import (
     ConfigError,
     build_dataclass,
-    check_finite,
     in_range,
     load_mapping,
     require,
 )
-from iout_mj.training.config import NAME, check_types, require_node_range
+from iout_mj.training.config import check_run_config, check_types, require_node_range
 from iout_mj.training.trainer import HELD_OUT_SEED
 
 ALGORITHMS = ("mappo", "ippo")
@@ -143,9 +142,7 @@ class MarlConfig:
     torch_threads: int = 1
 
     def __post_init__(self) -> None:
-        check_types(self)
-        check_finite(self)
-        require(bool(NAME.fullmatch(self.name)), "name", self.name, "letters, digits, - _ .")
+        check_run_config(self)
         require(self.algorithm in ALGORITHMS, "algorithm", self.algorithm, f"one of {ALGORITHMS}")
         in_range(self, "n_auvs", 1, MAX_AUVS)
         in_range(self, "n_max", self.n_auvs, MAX_AUVS)
