@@ -26,6 +26,8 @@ from iout_mj.envs import ENV_ID
 from iout_mj.envs.parallel_env import agent_observations
 from iout_mj.errors import CheckpointError, PolicyError, PolicyMismatchError
 from iout_mj.schema import ConfigError
+from iout_mj.training import marl_imitation
+from iout_mj.training.config import ImitationConfig
 from iout_mj.training.marl import (
     MarlConfig,
     MarlPhase,
@@ -166,6 +168,49 @@ def test_each_auv_acts_on_its_own_observation(tmp_path):
     together = torch.stack([p.argmax(-1) for p in policy.logits(obs)], -1)
     assert torch.equal(alone[0], together[0])
     assert policy(env, None).shape == (8,)
+
+
+def test_discounted_returns_of_the_scaled_team_reward():
+    data = marl_imitation.TeamDemonstrations(rewards=[np.array([10.0, 0.0, -20.0]), np.ones(1)])
+    expected = [0.1 + 0.5 * 0.0 + 0.25 * -0.2, 0.5 * -0.2, -0.2, 0.01]
+    np.testing.assert_allclose(data.returns(0.5, 0.01), expected)
+
+
+@pytest.mark.parametrize("algorithm", ["mappo", "ippo"])
+def test_imitation_fits_each_auv_to_its_share_of_the_planners_action(algorithm):
+    cfg = replace(tiny(algorithm), hidden=(64,))
+    env = TeamEnv(cfg, "kinematic", seed=0)
+    data = marl_imitation.TeamDemonstrations()
+    rng = np.random.default_rng(0)
+    metrics = marl_imitation.fly(env, 3, rng, None, 1.0, "greedy", data)
+    assert len(metrics) == 3 and all(all(m["docked"]) for m in metrics)
+    assert np.stack(data.actions).shape == (len(data.obs), 2, 4)
+    assert sum(len(r) for r in data.rewards) == len(data.obs)
+    torch.manual_seed(0)
+    learner = make_learner(cfg)
+    before, _ = marl_imitation.fit(learner, data, 0, 1e-3, rng)
+    after, nll = marl_imitation.fit(learner, data, 30, 3e-3, rng)
+    assert np.mean(after) > np.mean(before) + 0.2 and np.isfinite(nll)
+    obs, states = torch.as_tensor(np.stack(data.obs)), torch.as_tensor(np.stack(data.states))
+    with torch.no_grad():
+        v = marl_imitation.values(learner, obs, states)
+    targets = torch.as_tensor(data.returns(cfg.gamma, cfg.reward_scale), dtype=torch.float32)
+    fitted = ((v - targets[:, None]) ** 2).mean()
+    assert fitted < 0.5 * ((targets - targets.mean()) ** 2).mean()  # the critic learnt them
+
+
+def test_a_warm_started_run_records_its_rounds_and_resumes_without_repeating_them(tmp_path):
+    im = ImitationConfig(planner="greedy", episodes=2, epochs=2, rounds=1, round_episodes=1)
+    cfg = replace(tiny(agent_steps=128), imitation=im)
+    train_marl(cfg, tmp_path, progress=False)
+    curve = json.loads((tmp_path / "curve.json").read_text())
+    rounds = curve["imitation"]["rounds"]
+    assert [r["round"] for r in rounds] == [0, 1] and rounds[1]["states"] > rounds[0]["states"]
+    assert [r["agent_steps"] for r in curve["curve"]] == [0, 128]
+    resumed = train_marl(
+        replace(cfg, phases=(MarlPhase("kinematic", 256),)), tmp_path, resume=True, progress=False
+    )
+    assert resumed["imitation"] == curve["imitation"] and resumed["agent_steps"] == 256
 
 
 @pytest.mark.parametrize(

@@ -78,7 +78,13 @@ from iout_mj.schema import (
     load_mapping,
     require,
 )
-from iout_mj.training.config import check_run_config, check_types, require_node_range
+from iout_mj.training import marl_imitation
+from iout_mj.training.config import (
+    ImitationConfig,
+    check_run_config,
+    check_types,
+    require_node_range,
+)
 from iout_mj.training.trainer import HELD_OUT_SEED
 
 ALGORITHMS = ("mappo", "ippo")
@@ -122,6 +128,9 @@ class MarlConfig:
     """K of each training episode, drawn uniformly; its high end is the padded k_max."""
     layout: str = "random"
     env: Config = field(default_factory=Config)
+    imitation: ImitationConfig | None = None
+    """Warm start of actor and critic by DAgger from a centralised planner before PPO
+    (`training.marl_imitation`); null: PPO from scratch."""
     phases: tuple[MarlPhase, ...] = (MarlPhase(),)
     steps_per_batch: int = 2048
     """Joint steps (TorchRL frames) collected per PPO iteration."""
@@ -629,6 +638,16 @@ def train_marl(
         )
     episodes = held_out(cfg)
     greedy = {b: fly(cfg, greedy_policy(), episodes, b) for b in {p.backend for p in cfg.phases}}
+    if cfg.imitation is not None and "imitation" not in run:
+        env = TeamEnv(cfg, "kinematic", cfg.seed)
+        run["imitation"] = marl_imitation.warm_start(learner, env, progress)
+        env.close()
+        row = {"agent_steps": 0, "seconds": 0.0, "backend": "kinematic"}
+        row |= fly(cfg, team_policy(learner), episodes, "kinematic")
+        run["curve"].append(row)
+        if progress:
+            print(json.dumps(row), flush=True)
+        export(learner, out / CHECKPOINT, checkpoint_tensors(learner), run)
     batch_index = 0
     for phase in cfg.phases:
         frames = cfg.frames(phase)
@@ -678,6 +697,7 @@ def train_marl(
         "agent_steps_per_s": round(run["agent_steps"] / max(run["seconds"], 1e-9), 1),
         "final": {k: last.get(k) for k in ("mean_aoi_horizon", "docked_rate")},
         "greedy": greedy,
+        "imitation": run.get("imitation"),
         "episodes": asdict(episodes),
         "policy": str(out / POLICY),
     }
