@@ -2,6 +2,8 @@
 what is accepted, never a numpy, torch or MuJoCo error from deep inside, a silent broadcast or
 a non-finite result."""
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -157,6 +159,12 @@ def test_evaluate_still_flies_and_save_refuses_no_rows(tmp_path):
     with pytest.raises(UsageError, match="no summary rows"):
         evaluate.save([], [], tmp_path / "out")  # was an IndexError
     assert not (tmp_path / "out").exists()
+    bad = [{**rows[0], "mean_aoi_horizon": float("nan")}]
+    with pytest.raises(UsageError, match=r"non-finite number.*accepted finite metrics"):
+        evaluate.save(bad, episodes, tmp_path / "out")  # was written as a bare NaN
+    assert not (tmp_path / "out").exists()
+    evaluate.save(rows, episodes, tmp_path / "out")
+    assert json.loads((tmp_path / "out" / "results.json").read_text()) == rows
 
 
 # ------------------------------------------------------------------ statistics, compare

@@ -422,12 +422,17 @@ def save(rows: list[dict[str, Any]], episodes: list[dict[str, Any]], out: Path) 
     writer.writeheader()
     writer.writerows(rows)
     traces = {f"{e['policy']}, N={e['n_auvs']}": e.pop("trace") for e in episodes if "trace" in e}
-    files = {
-        "results.json": json.dumps(rows, indent=2) + "\n",
-        "results.csv": table.getvalue(),
-        "episodes.json": json.dumps(episodes) + "\n",
-        "traces.json": json.dumps(traces) + "\n",
-    }
+    try:  # strict JSON: a NaN or infinity would be written as a bare token no reader accepts
+        files = {
+            "results.json": json.dumps(rows, indent=2, allow_nan=False) + "\n",
+            "results.csv": table.getvalue(),
+            "episodes.json": json.dumps(episodes, allow_nan=False) + "\n",
+            "traces.json": json.dumps(traces, allow_nan=False) + "\n",
+        }
+    except ValueError as exc:
+        raise UsageError(
+            f"cannot save results holding a non-finite number ({exc}): accepted finite metrics"
+        ) from exc
     path = out
     try:
         out.mkdir(parents=True, exist_ok=True)
