@@ -17,14 +17,20 @@ from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
 from iout_mj.agents.team_policy import (
     TeamPolicy,
-    node_present_slice,
     padded_observations,
     padded_state,
 )
 from iout_mj.cli import main
 from iout_mj.envs import ENV_ID
-from iout_mj.envs.parallel_env import agent_observations
 from iout_mj.errors import CheckpointError, PolicyError, PolicyMismatchError
+from iout_mj.mission.agent_view import (
+    NODE_FEATURES,
+    OTHER_FEATURES,
+    OWN_FEATURES,
+    agent_observations,
+    node_present_slice,
+)
+from iout_mj.mission.tokens import GLOBAL_FEATURES, auv_features, node_features
 from iout_mj.schema import ConfigError
 from iout_mj.training import marl_imitation
 from iout_mj.training.config import ImitationConfig
@@ -56,16 +62,17 @@ def tiny(algorithm: str = "mappo", agent_steps: int = 256) -> MarlConfig:
 
 
 def unpadded(obs: np.ndarray, n: int, k: int, n_max: int, k_max: int) -> np.ndarray:
-    """A padded observation (`team_policy`) without its padding and present flags."""
-    nodes = obs[7 : 7 + 4 * k_max].reshape(4, k_max)[:3, :k].ravel()
-    at = 7 + 4 * k_max
-    others = obs[at : at + 4 * (n_max - 1)].reshape(n_max - 1, 4)[: n - 1]
-    at += 4 * (n_max - 1)
-    tail = [others[:, :2].ravel(), others[:, 2], obs[at : at + 1], obs[at + 1 : at + 1 + n]]
-    return np.concatenate([obs[:7], nodes, *tail])
+    """A padded view (`mission.agent_view`) cut to N AUVs and K nodes."""
+    head = GLOBAL_FEATURES + OWN_FEATURES
+    at = head
+    others = obs[at : at + OTHER_FEATURES * (n_max - 1)].reshape(n_max - 1, -1)[: n - 1]
+    at += OTHER_FEATURES * (n_max - 1)
+    nodes = obs[at : at + NODE_FEATURES * k_max].reshape(k_max, -1)[:k]
+    at += NODE_FEATURES * k_max
+    return np.concatenate([obs[:head], others.ravel(), nodes.ravel(), obs[at : at + n]])
 
 
-def test_padded_observations_and_state_hold_the_envs_own(rng):
+def test_padded_views_hold_the_envs_own_and_the_tokens(rng):
     env = iout_mj.parallel_env(n_auvs=3, n_nodes=5, layout="random")
     env.reset(seed=3)
     for _ in range(4):
@@ -73,9 +80,28 @@ def test_padded_observations_and_state_hold_the_envs_own(rng):
     m = env.mission
     padded = padded_observations(m, 4, 8)
     own = agent_observations(m)
+    assert own.shape == (3, env.observation_space("auv_0").shape[0])
     for i in range(3):
         np.testing.assert_array_equal(unpadded(padded[i], 3, 5, 4, 8), own[i])
-    assert padded[:, node_present_slice(8)].tolist() == [[1] * 5 + [0] * 3] * 3
+    assert padded[:, node_present_slice(4, 8)].tolist() == [[1] * 5 + [0] * 3] * 3
+    # against the token observation: AUV 1's own token, its links and the others' docked flags
+    tokens = m.observe_tokens(k_max=5)
+    a, f = auv_features(3), node_features(3)
+    auv = tokens[GLOBAL_FEATURES : GLOBAL_FEATURES + 3 * a].reshape(3, a)
+    node = tokens[GLOBAL_FEATURES + 3 * a : GLOBAL_FEATURES + 3 * a + 5 * f].reshape(5, f)
+    view = own[1]
+    np.testing.assert_array_equal(view[:GLOBAL_FEATURES], tokens[:GLOBAL_FEATURES])
+    np.testing.assert_array_equal(view[GLOBAL_FEATURES : GLOBAL_FEATURES + 2], auv[1, :2])
+    at = GLOBAL_FEATURES + OWN_FEATURES
+    others = view[at : at + 2 * OTHER_FEATURES].reshape(2, OTHER_FEATURES)
+    np.testing.assert_array_equal(others[:, :3].ravel(), auv[1, OWN_FEATURES:])
+    docked = auv[:, 6]  # after position 2, heading setpoint 2, speed, speed setpoint
+    assert others[:, 3].tolist() == docked[[0, 2]].tolist() and others[:, 4].tolist() == [1, 1]
+    nodes = view[at + 2 * OTHER_FEATURES : at + 2 * OTHER_FEATURES + 5 * NODE_FEATURES]
+    nodes = nodes.reshape(5, NODE_FEATURES)
+    np.testing.assert_array_equal(nodes[:, :5], node[:, :5])  # position, AoI, progress, energy
+    np.testing.assert_array_equal(nodes[:, 5:9], node[:, 5 + 4 : 5 + 8])  # AUV 1's links
+    assert view[-3:].tolist() == [0, 1, 0]
     state = padded_state(m, 4, 8)
     g = {k: v.astype(np.float32) for k, v in m.observation().items()}  # state()'s groups
     auvs = state[: 4 * 8].reshape(4, 8)

@@ -41,10 +41,13 @@ def test_team_reward_state_and_own_observations_match_the_gymnasium_env(rng):
         assert infos["auv_1"]["reward_terms"] == info["reward_terms"]
         m = env.mission
         for i, agent in enumerate(("auv_0", "auv_1")):
-            np.testing.assert_allclose(obs[agent][:2], m.state.positions_m[i] / 1000, atol=1e-6)
+            own = obs[agent][3:5]  # after the clock, the node share and the mean AoI
+            np.testing.assert_allclose(own, m.state.positions_m[i] / 1000, atol=1e-6)
             other = m.state.positions_m[1 - i] - m.state.positions_m[i]
-            tail = obs[agent][7 + 3 * 7 : 7 + 3 * 7 + 2]
-            np.testing.assert_allclose(tail, other / 1000, atol=1e-6)  # the other AUV, relative
+            bearing = np.arctan2(other[1], other[0]) - m.state.heading_sp[i]
+            seen = obs[agent][3 + 11 : 3 + 11 + 3]  # the other AUV, relative to this one
+            expected = [np.hypot(*other) / (1000 * np.sqrt(2)), np.cos(bearing), np.sin(bearing)]
+            np.testing.assert_allclose(seen, expected, atol=1e-5)
     assert term["auv_0"] == t and trunc["auv_0"] == tr
 
 

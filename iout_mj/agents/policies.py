@@ -141,14 +141,19 @@ def _legacy(folder: Path, env: Any) -> LoadedPolicy:
     return LoadedPolicy(model.policy, Normalizer.from_vec_normalize(stats), manifest, stats)
 
 
-GENERAL = "ppo-general"
-"""The general policies' name: `ppo-general-n<N>` for the env's N."""
+PER_N_FAMILIES = ("ppo-general", "mappo")
+"""Names that stand for one shipped policy per N: `<name>-n<N>` for the env's N (the general
+token policies; the decentralised MAPPO team policies)."""
+
+
+def for_n(name: str, n_auvs: int) -> str:
+    """The policy `name` stands for in an env of `n_auvs` AUVs (see `PER_N_FAMILIES`)."""
+    return f"{name}-n{n_auvs}" if name in PER_N_FAMILIES else name
 
 
 def read_trained(name: str, env: Any, trust_pickle: bool = False) -> LoadedPolicy:
     """A trained policy by name or folder, checked against `env`."""
-    if name == GENERAL:
-        name = f"{GENERAL}-n{env.unwrapped.mission.n_auvs}"
+    name = for_n(name, env.unwrapped.mission.n_auvs)
     folder = resolve_policy_folder(name)
     if (folder / MANIFEST).is_file():
         try:

@@ -1,14 +1,11 @@
 """A decentralised team policy: one actor shared by every AUV, each acting on its own
-observation (the PettingZoo env's, padded to fixed sizes), as trained by `training.marl`.
+observation, as trained by `training.marl`.
 
-The padded observation of AUV i serves any N <= n_max and K <= k_max with one network:
-
-    own 7 | per node slot (k_max): AoI, energy, distance, present | per other-AUV slot
-    (n_max - 1): relative position 2, docked, present | time remaining 1 | one-hot index n_max
-
-Absent slots are zeros with present = 0; the actor's logits for absent nodes are masked, so an
-AET or uplink node is always one of the K present. `padded_state` is the env's global
-observation (`ParallelEnv.state()`) padded the same way, the centralised critic's input.
+An AUV's observation is its own view of the mission (`mission.agent_view`: the token
+observation as that AUV sees it), padded to n_max AUVs and k_max nodes, so one network serves
+any N <= n_max and K <= k_max. The actor's logits for absent nodes are masked, so an AET or
+uplink node is always one of the K present. `padded_state` is the env's global observation
+(`ParallelEnv.state()`) padded the same way, the centralised critic's input.
 
 A team policy is stored in the safe policy format as an SB3 MLP (the actor's layers; no value
 layers) whose manifest has a `team` entry ({algorithm, n_max, k_max}); `TeamPolicy` flies it in
@@ -25,23 +22,16 @@ import torch
 from iout_mj.agents.policy_format import LoadedPolicy
 from iout_mj.errors import PolicyMismatchError
 from iout_mj.mission import Mission
+from iout_mj.mission.agent_view import (
+    agent_observation_size,
+    agent_observations,
+    node_present_slice,
+)
 
-OWN_FEATURES = 7
-NODE_FEATURES = 4
-OTHER_FEATURES = 4
 ACTION_DIMS = 4
 """(heading, speed, AET node, uplink node) per AUV."""
 
-
-def team_observation_size(n_max: int, k_max: int) -> int:
-    """Entries of one AUV's padded observation (see the module docstring)."""
-    return OWN_FEATURES + NODE_FEATURES * k_max + OTHER_FEATURES * (n_max - 1) + 1 + n_max
-
-
-def node_present_slice(k_max: int) -> slice:
-    """Where the node-present flags lie in a padded observation."""
-    start = OWN_FEATURES + 3 * k_max
-    return slice(start, start + k_max)
+team_observation_size = agent_observation_size
 
 
 def check_fit(n_auvs: int, n_nodes: int, n_max: int, k_max: int) -> None:
@@ -54,36 +44,10 @@ def check_fit(n_auvs: int, n_nodes: int, n_max: int, k_max: int) -> None:
 
 
 def padded_observations(m: Mission, n_max: int, k_max: int) -> np.ndarray:
-    """(N, team_observation_size) float32: every AUV's own observation, padded. Without its
-    present flags and padding it is the PettingZoo env's (`parallel_env.agent_observations`)."""
-    n, k = m.n_auvs, m.n_nodes
-    check_fit(n, k, n_max, k_max)
-    g, positions = m.observation(), m.state.positions_m
-    out = np.zeros((n, team_observation_size(n_max, k_max)), dtype=np.float32)
-    out[:, 0:2] = g["auv_position"].reshape(n, 2)
-    out[:, 2:4] = g["auv_heading"].reshape(n, 2)
-    out[:, 4] = g["auv_speed"]
-    out[:, 5] = g["docked"]
-    out[:, 6] = g["dock_distance"]
-    nodes = out[:, OWN_FEATURES : OWN_FEATURES + NODE_FEATURES * k_max].reshape(
-        n, NODE_FEATURES, k_max
-    )
-    nodes[:, 0, :k] = g["aoi"]
-    nodes[:, 1, :k] = g["node_energy"]
-    nodes[:, 2, :k] = g["distance"].reshape(n, k)
-    nodes[:, 3, :k] = 1.0
-    at = OWN_FEATURES + NODE_FEATURES * k_max
-    others = out[:, at : at + OTHER_FEATURES * (n_max - 1)].reshape(n, n_max - 1, OTHER_FEATURES)
-    docked = m.state.docked.astype(np.float32)
-    for i in range(n):
-        rest = [j for j in range(n) if j != i]
-        others[i, : n - 1, 0:2] = (positions[rest] - positions[i]) * m.inv_area
-        others[i, : n - 1, 2] = docked[rest]
-        others[i, : n - 1, 3] = 1.0
-    at += OTHER_FEATURES * (n_max - 1)
-    out[:, at] = g["time_remaining"][0]
-    out[:, at + 1 : at + 1 + n] = np.eye(n, dtype=np.float32)
-    return out
+    """(N, team_observation_size(n_max, k_max)) float32: every AUV's own view, padded (at
+    n_max = N, k_max = K it is the PettingZoo env's agent observation)."""
+    check_fit(m.n_auvs, m.n_nodes, n_max, k_max)
+    return agent_observations(m, n_max, k_max)
 
 
 def state_size(n_max: int, k_max: int) -> int:
@@ -146,7 +110,7 @@ class TeamPolicy:
             assert isinstance(features, torch.Tensor)  # a Box observation: one tensor
             latent = policy.mlp_extractor.forward_actor(features)
             logits = policy.action_net(latent)
-        present = torch.as_tensor(obs[:, node_present_slice(self.k_max)])
+        present = torch.as_tensor(obs[:, node_present_slice(self.n_max, self.k_max)])
         return masked_logits(logits, self.nvec, present)
 
     def __call__(self, env: Any, _obs: np.ndarray) -> np.ndarray:

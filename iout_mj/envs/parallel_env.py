@@ -1,7 +1,8 @@
 """PettingZoo: the mission as a `ParallelEnv`, one agent per AUV (`auv_0`, `auv_1`, ...).
 
-Each agent observes its own state, the nodes as it sees them and the other AUVs relative to
-itself, and chooses its own (heading, speed, AET node, uplink node). The reward is the
+Each agent observes its own view of the mission (`mission.agent_view`: the clock, its own
+pose and docking slack, the other AUVs relative to itself, per node its position, AoI, energy
+and its own link), and chooses its own (heading, speed, AET node, uplink node). The reward is the
 paper's team reward, the same for every agent; `infos[agent]` holds the team's reward terms
 and the agent's own state. `state()` is the global observation of `iout_mj/MultiAUV-v0` (for
 a centralised critic). All agents end together: when every AUV docked, a battery is empty,
@@ -17,49 +18,10 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from iout_mj.envs.gym_env import MultiAUVEnv
-from iout_mj.mission import OBS_HIGH, OBS_LOW, Mission
+from iout_mj.mission import OBS_HIGH, OBS_LOW
 from iout_mj.mission.actions import ACTION_FIELDS, ActionError
+from iout_mj.mission.agent_view import agent_observation_size, agent_observations
 from iout_mj.scenarios import ConfigLike
-
-
-def agent_observation_size(n_auvs: int, n_nodes: int) -> int:
-    """own position 2, heading 2, speed 1, docked 1, dock distance 1; per node AoI, energy,
-    distance (3K); per other AUV relative position 2 and docked 1; time remaining 1; the
-    agent's one-hot index N (so that a policy shared by all agents can tell them apart)."""
-    return 7 + 3 * n_nodes + 3 * (n_auvs - 1) + 1 + n_auvs
-
-
-def agent_observations(m: Mission) -> np.ndarray:
-    """(N, D) float32: every agent's observation (see `agent_observation_size`), made of the
-    flat observation's groups, as the compiled rules scale them."""
-    s, n, k = m.state, m.n_auvs, m.n_nodes
-    g = m.observation()
-    own = np.concatenate(
-        [
-            g["auv_position"].reshape(n, 2),
-            g["auv_heading"].reshape(n, 2),
-            g["auv_speed"][:, None],
-            g["docked"][:, None],
-            g["dock_distance"][:, None],
-        ],
-        axis=1,
-    )
-    nodes = np.concatenate(
-        [
-            np.broadcast_to(g["aoi"], (n, k)),
-            np.broadcast_to(g["node_energy"], (n, k)),
-            g["distance"].reshape(n, k),
-        ],
-        axis=1,
-    )
-    others = []
-    for i in range(n):
-        rest = [j for j in range(n) if j != i]
-        rel = (s.positions_m[rest] - s.positions_m[i]) * m.inv_area
-        others.append(np.concatenate([rel.ravel(), s.docked[rest].astype(float)]))
-    time_left = np.broadcast_to(g["time_remaining"], (n, 1))
-    parts = [own, nodes, np.array(others).reshape(n, -1), time_left, np.eye(n)]
-    return np.concatenate(parts, axis=1).astype(np.float32)
 
 
 class MultiAUVParallelEnv(ParallelEnv):

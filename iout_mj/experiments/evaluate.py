@@ -29,7 +29,13 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from iout_mj.agents.policies import GENERAL, LEGACY_FILES, load_policy, split_search
+from iout_mj.agents.policies import (
+    LEGACY_FILES,
+    PER_N_FAMILIES,
+    for_n,
+    load_policy,
+    split_search,
+)
 from iout_mj.agents.policy_format import MANIFEST
 from iout_mj.agents.registry import POLICIES
 from iout_mj.agents.rollout import run_episode
@@ -219,8 +225,8 @@ def seed_variant(name: str, training_seed: int, n_auvs: int) -> str:
     if candidates is not None:  # P+rollout: training seed k of P, searched the same way
         return seed_variant(base, training_seed, n_auvs) + name[len(base) :]
     suffix = f"-seed{training_seed}"
-    if name == GENERAL:
-        return f"{GENERAL}-n{n_auvs}{suffix}"
+    if name in PER_N_FAMILIES:
+        return for_n(name, n_auvs) + suffix
     path = Path(name)
     seed0 = [i for i, part in enumerate(path.parts) if part.endswith("-seed0")]
     if seed0:

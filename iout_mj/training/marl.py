@@ -333,7 +333,7 @@ class ActorNet(nn.Module):
     def __init__(self, cfg: MarlConfig, nvec: list[int]):
         super().__init__()
         self.net = mlp(team_observation_size(cfg.n_max, cfg.k_max), cfg.hidden, sum(nvec))
-        self.present = node_present_slice(cfg.k_max)
+        self.present = node_present_slice(cfg.n_max, cfg.k_max)
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.net(obs), obs[..., self.present]
