@@ -69,8 +69,8 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 def _policy_help() -> str:
     shipped = ", ".join(shipped_policies())
     return (
-        f"{', '.join(BASELINES)}, a shipped policy ({shipped}; ppo-general picks "
-        "ppo-general-n<N> for the env's N) or a folder"
+        f"{', '.join(BASELINES)}, a shipped policy ({shipped}; ppo-general and mappo pick "
+        "ppo-general-n<N> and mappo-n<N> for the env's N) or a folder"
     )
 
 

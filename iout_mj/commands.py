@@ -515,6 +515,7 @@ def cmd_list(args: argparse.Namespace) -> int:
             **{k: "baseline" for k in POLICIES},
             **{k: "shipped PPO policy" for k in shipped_policies()},
             "ppo-general": "the shipped general policy for the env's N",
+            "mappo": "the shipped MAPPO team policy (decentralised) for the env's N",
         },
         "backends": {k: b.description for k, b in BACKENDS.items()},
         "layouts": {

@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 
+import numpy as np
 import pytest
 from conftest import ROOT
 from conftest import run_cli as run
@@ -227,6 +228,17 @@ def test_evaluate_skips_the_n_no_general_policy_is_shipped_for_and_flies_the_res
     assert f"skipped ppo-general at N={n}, K=3: unknown policy 'ppo-general-n{n}'" in out.stderr
     alone = run("evaluate", "--policy", "ppo-general", "--n-auvs", n, "--nodes", "3", check=False)
     assert alone.returncode != 0 and f"unknown policy 'ppo-general-n{n}'" in alone.stderr
+
+
+def test_evaluate_flies_mappo_as_the_shipped_team_policy_for_each_n():
+    out = run(
+        *("evaluate", "--policy", "mappo", "greedy", "--n-auvs", "1", "2", "--nodes", "5"),
+        *("--layout", "random", "--episodes", "1", "--backend", "kinematic", "--json"),
+    )
+    rows = {(r["policy"], r["n_auvs"]): r for r in json.loads(out.stdout)}
+    assert set(rows) == {("mappo", 2), ("greedy", 1), ("greedy", 2)}
+    assert np.isfinite(rows["mappo", 2]["mean_aoi_horizon"])
+    assert "skipped mappo at N=1, K=5: unknown policy 'mappo-n1'" in out.stderr
 
 
 def readme_commands():

@@ -253,10 +253,11 @@ def test_bad_configs_say_what_is_accepted(change, match):
         replace(tiny(), **change)
 
 
-@pytest.mark.parametrize("name", ["mappo-n2", "ippo-n2"])
+@pytest.mark.parametrize("name", ["mappo-n2", "mappo-n3", "mappo-n4", "ippo-n2"])
 def test_shipped_configs_load(name):
     cfg = MarlConfig.load(ROOT / "training" / "configs" / f"{name}.yaml")
-    assert cfg.algorithm == name.split("-")[0] and cfg.n_auvs == 2 and cfg.node_range == (3, 10)
+    assert cfg.algorithm == name.split("-")[0] and cfg.n_auvs == int(name[-1])
+    assert cfg.node_range == (3, 20) and cfg.imitation is not None
 
 
 def test_train_marl_command(tmp_path, capsys):
