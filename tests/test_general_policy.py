@@ -22,7 +22,7 @@ from iout_mj.mission.tokens import K_MAX, node_features, token_size
 from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError, build_dataclass
 from iout_mj.training import imitation
-from iout_mj.training.config import TrainConfig
+from iout_mj.training.config import ImitationConfig, TrainConfig
 from iout_mj.training.trainer import scenario_cells
 
 
@@ -136,7 +136,9 @@ def test_imitation_learns_the_planners_actions():
     policy = TokenPolicy(*token_spaces(base), lambda _: 1e-3, width=32)
     data = imitation.Demonstrations()
     rng = np.random.RandomState(0)
-    metrics = imitation.fly(cells, 6, rng, None, 1.0, "tour-scheduler", data)
+    metrics = imitation.fly(
+        cells, 6, rng, None, 1.0, ImitationConfig(planner="tour-scheduler").teacher, data
+    )
     assert len(data.obs) == sum(len(r) for r in data.rewards) and len(metrics) == 6
     before, *_ = imitation.fit(policy, data, 0.99, 1, learning_rate=1e-9, rng=rng)
     after, nll, rms = imitation.fit(policy, data, 0.99, 25, rng=rng)

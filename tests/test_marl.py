@@ -208,7 +208,9 @@ def test_imitation_fits_each_auv_to_its_share_of_the_planners_action(algorithm):
     env = TeamEnv(cfg, "kinematic", seed=0)
     data = marl_imitation.TeamDemonstrations()
     rng = np.random.default_rng(0)
-    metrics = marl_imitation.fly(env, 3, rng, None, 1.0, "greedy", data)
+    metrics = marl_imitation.fly(
+        env, 3, rng, None, 1.0, ImitationConfig(planner="greedy").teacher, data
+    )
     assert len(metrics) == 3 and all(all(m["docked"]) for m in metrics)
     assert np.stack(data.actions).shape == (len(data.obs), 2, 4)
     assert sum(len(r) for r in data.rewards) == len(data.obs)
@@ -223,6 +225,24 @@ def test_imitation_fits_each_auv_to_its_share_of_the_planners_action(algorithm):
     targets = torch.as_tensor(data.returns(cfg.gamma, cfg.reward_scale), dtype=torch.float32)
     fitted = ((v - targets[:, None]) ** 2).mean()
     assert fitted < 0.5 * ((targets - targets.mean()) ** 2).mean()  # the critic learnt them
+
+
+def test_a_teacher_with_a_docking_margin_docks_earlier():
+    def docked_at(teacher):
+        env = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=9, layout="random")
+        env.reset(seed=5)
+        policy, done = teacher(0), False
+        while not done:
+            _, _, terminated, truncated, info = env.step(policy(env.unwrapped.mission))
+            done = terminated or truncated
+        assert all(info["metrics"]["docked"])
+        return env.unwrapped.mission.state.slot
+
+    own = docked_at(ImitationConfig(planner="tour-scheduler").teacher)
+    early = docked_at(ImitationConfig(planner="tour-scheduler", teacher_dock_spare_slots=8).teacher)
+    assert early < own
+    with pytest.raises(ConfigError, match=r"planner='greedy'.*with teacher_dock_spare_slots"):
+        ImitationConfig(planner="greedy", teacher_dock_spare_slots=4)
 
 
 def test_a_warm_started_run_records_its_rounds_and_resumes_without_repeating_them(tmp_path):

@@ -138,6 +138,9 @@ class TourScheduler:
     the last moment that still reaches it. Uplinks follow `schedule_uplinks` every slot."""
 
     name = "tour-scheduler"
+    dock_spare_slots = 2.0
+    """Slots to spare when deciding to head into the dock (a teacher for imitation may keep
+    more, so that its pupil's timing errors do not make it late)."""
 
     def reset(self, seed: int | None = None) -> None:
         self._tours: list[list[int]] | None = None
@@ -178,7 +181,7 @@ class TourScheduler:
     def _must_dock(self, mission: Mission) -> BoolArray:
         """Head into the dock when the final approach (slowing to the final speed, turning,
         flying to the zone's edge at the ground speeds the current allows) takes all the slots
-        left, with one to spare."""
+        left, with `dock_spare_slots` to spare."""
         s, m, slot_s = mission.state, mission.cfg.motion, mission.cfg.scenario.slot_s
         delta = mission.dock_m - s.positions_m
         turn = _dock_turn_rad(mission)
@@ -199,8 +202,10 @@ class TourScheduler:
             ground(final) * slot_s
         )
         left = mission.cfg.scenario.horizon_slots - s.slot
-        # one slot to spare, and more against a current (its drift while turning)
-        spare = 2 + CURRENT_SPARE_SLOTS_PER_MPS * float(np.hypot(*s.current_mps))
+        # slots to spare, and more against a current (its drift while turning)
+        spare = self.dock_spare_slots + CURRENT_SPARE_SLOTS_PER_MPS * float(
+            np.hypot(*s.current_mps)
+        )
         return turn_slots + slow_slots + travel_slots + spare >= left
 
     def __call__(self, mission: Mission) -> IntArray:

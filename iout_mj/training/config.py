@@ -79,7 +79,8 @@ NOISE_MODELS = ("flat", "wenz")
 
 @dataclass(frozen=True)
 class ImitationConfig:
-    """Warm start of a general policy by DAgger from a planner (`training.imitation`)."""
+    """Warm start of a policy by DAgger from a planner (`training.imitation` for the general
+    policies, `training.marl_imitation` for team policies)."""
 
     planner: str = "tour-scheduler"
     episodes: int = 300
@@ -92,13 +93,26 @@ class ImitationConfig:
     beta: float = 0.5
     """Probability that the planner acts in DAgger round 1; it halves every round."""
     learning_rate: float = 1e-3
+    teacher_dock_spare_slots: float | None = None
+    """Slots the teacher keeps in hand when heading into the dock (tour-scheduler and
+    solver-tour; null: the planner's own), so that a pupil's timing errors still dock."""
 
     def __post_init__(self) -> None:
+        from iout_mj.agents.planners import TourScheduler
         from iout_mj.agents.registry import POLICIES as PLANNERS
 
         check_types(self)
         check_finite(self)
         require(self.planner in PLANNERS, "planner", self.planner, f"one of {sorted(PLANNERS)}")
+        if self.teacher_dock_spare_slots is not None:
+            tours = sorted(k for k, v in PLANNERS.items() if issubclass(v, TourScheduler))
+            require(
+                self.planner in tours,
+                "planner",
+                self.planner,
+                f"one of {tours} with teacher_dock_spare_slots",
+            )
+            in_range(self, "teacher_dock_spare_slots", 0.0, 100.0)
         for name in ("episodes", "round_episodes"):
             in_range(self, name, 1, 10_000)
         for name in ("epochs", "round_epochs"):
@@ -110,6 +124,15 @@ class ImitationConfig:
     @property
     def total_episodes(self) -> int:
         return self.episodes + self.rounds * self.round_episodes
+
+    def teacher(self, seed: int) -> Any:
+        """The planner, seeded, with this config's docking margin (a `Policy`)."""
+        from iout_mj.agents.registry import make_policy
+
+        policy = make_policy(self.planner, seed)
+        if self.teacher_dock_spare_slots is not None:
+            policy.dock_spare_slots = self.teacher_dock_spare_slots  # type: ignore[attr-defined]
+        return policy
 
 
 @dataclass(frozen=True)

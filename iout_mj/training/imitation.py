@@ -19,7 +19,6 @@ import numpy as np
 import torch
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 
-from iout_mj.agents.registry import make_policy
 from iout_mj.config import Config
 from iout_mj.envs.gym_env import ENV_ID
 
@@ -50,12 +49,13 @@ def fly(
     rng: np.random.RandomState,
     learner: Callable[[np.ndarray], np.ndarray] | None,
     beta: float,
-    planner: str,
+    teacher: Callable[[int], Any],
     into: Demonstrations,
     flown: Callable[[], object] | None = None,
 ) -> list[dict[str, Any]]:
-    """Fly `episodes` kinematic episodes on random cells, recording the planner's actions in
-    the visited states; the learner acts where given (the planner with probability beta);
+    """Fly `episodes` kinematic episodes on random cells, recording the teacher's actions
+    (`teacher(seed)`: a planner, as `ImitationConfig.teacher` makes it) in the visited states;
+    the learner acts where given (the teacher with probability beta);
     `flown()` after every episode."""
     envs: dict[int, Any] = {}
     metrics = []
@@ -67,7 +67,7 @@ def fly(
         env = envs[c]
         seed = int(rng.randint(2**31 - 1))
         env.reset(seed=seed)
-        expert = make_policy(planner, seed)
+        expert = teacher(seed)
         mission, rewards, done = env.unwrapped.mission, [], False
         while not done:
             tokens = mission.observe_tokens()

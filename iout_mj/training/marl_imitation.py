@@ -20,7 +20,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from iout_mj.agents.registry import make_policy
 from iout_mj.agents.team_policy import ACTION_DIMS, padded_observations, padded_state
 
 if TYPE_CHECKING:
@@ -58,17 +57,17 @@ def fly(
     rng: np.random.Generator,
     actor: Actor | None,
     beta: float,
-    planner: str,
+    teacher: Callable[[int], Any],
     into: TeamDemonstrations,
 ) -> list[dict[str, Any]]:
-    """Fly `episodes` episodes of the `TeamEnv` `env` (the planner's actions recorded in every
-    state reached); the actor acts where given, the planner with probability beta. Returns
-    each episode's metrics."""
+    """Fly `episodes` episodes of the `TeamEnv` `env`, recording the actions of the teacher
+    (`teacher(seed)`, as `ImitationConfig.teacher` makes it) in every state reached; the actor
+    acts where given, the teacher with probability beta. Returns each episode's metrics."""
     cfg, metrics = env.cfg, []
     for _ in range(episodes):
         env.reset(seed=int(rng.integers(2**31)))
         mission = env.current.mission
-        expert = make_policy(planner, int(rng.integers(2**31)))
+        expert = teacher(int(rng.integers(2**31)))
         rewards: list[float] = []
         while env.agents:
             obs = padded_observations(mission, cfg.n_max, cfg.k_max)
@@ -154,7 +153,7 @@ def warm_start(learner: Learner, env: Any, progress: bool = True) -> dict[str, A
     rng = np.random.default_rng(learner.cfg.seed)
     data = TeamDemonstrations()
     rounds = []
-    flown = fly(env, im.episodes, rng, None, 1.0, im.planner, data)
+    flown = fly(env, im.episodes, rng, None, 1.0, im.teacher, data)
     for r in range(im.rounds + 1):
         epochs = im.epochs if r == 0 else im.round_epochs
         accuracy, nll = fit(learner, data, epochs, im.learning_rate, rng)
@@ -174,5 +173,5 @@ def warm_start(learner: Learner, env: Any, progress: bool = True) -> dict[str, A
         if r < im.rounds:
             beta = im.beta / 2**r
             actor = greedy_actor(learner)
-            flown = fly(env, im.round_episodes, rng, actor, beta, im.planner, data)
+            flown = fly(env, im.round_episodes, rng, actor, beta, im.teacher, data)
     return {"planner": im.planner, "rounds": rounds}

@@ -200,7 +200,7 @@ def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> list[str]:
 
     with bar:
         bar.set_postfix_str(f"round 0/{im.rounds}: the planner flies")
-        imitation.fly(cells, im.episodes, rng, None, 1.0, im.planner, data, bar.update)
+        imitation.fly(cells, im.episodes, rng, None, 1.0, im.teacher, data, bar.update)
         for r in range(im.rounds + 1):
             acc, nll, rms = imitation.fit(
                 model.policy,
@@ -223,7 +223,7 @@ def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> list[str]:
                     f"round {r + 1}/{im.rounds}: the policy flies (the planner at p={beta:.3g})"
                 )
                 imitation.fly(
-                    cells, im.round_episodes, rng, learner, beta, im.planner, data, bar.update
+                    cells, im.round_episodes, rng, learner, beta, im.teacher, data, bar.update
                 )
                 epochs, beta = im.round_epochs, beta / 2
     model.get_vec_normalize_env().ret_rms = rms
