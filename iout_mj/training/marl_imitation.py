@@ -12,6 +12,7 @@ is centralised; the actor it teaches is not: it acts on what one AUV observes.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -145,11 +146,12 @@ def fit(
 
 
 def warm_start(learner: Learner, env: Any, progress: bool = True) -> dict[str, Any]:
-    """DAgger from `learner.cfg.imitation` on the `TeamEnv` `env`; returns a record per
-    round: states, accuracy, negative log-likelihood and the flown episodes' mean AoI over
-    T_max and docking share."""
+    """DAgger from `learner.cfg.imitation` on the `TeamEnv` `env`; returns its wall time and a
+    record per round: states, accuracy, negative log-likelihood and the flown episodes' mean
+    AoI over T_max and docking share."""
     im = learner.cfg.imitation
     assert im is not None
+    start = time.perf_counter()
     rng = np.random.default_rng(learner.cfg.seed)
     data = TeamDemonstrations()
     rounds = []
@@ -174,4 +176,5 @@ def warm_start(learner: Learner, env: Any, progress: bool = True) -> dict[str, A
             beta = im.beta / 2**r
             actor = greedy_actor(learner)
             flown = fly(env, im.round_episodes, rng, actor, beta, im.teacher, data)
-    return {"planner": im.planner, "rounds": rounds}
+    seconds = round(time.perf_counter() - start, 1)
+    return {"planner": im.planner, "seconds": seconds, "rounds": rounds}
