@@ -1,7 +1,8 @@
 """Every `iout-mj` command of the README runs, in the order the README gives them, shortened
 for CI: one episode per cell on the kinematic model, a few slots of video, a smoke training
-of the same kind (`shortened` says exactly what changes). A `--resume` runs after the run it
-resumes; a training the README shows twice into one run folder starts it again (--overwrite);
+of the same kind (`shortened` says exactly what changes; `train-marl` trains smoke-mappo.yaml).
+A `--resume` runs after the run it resumes; a training the README shows twice into one run
+folder starts it again (--overwrite);
 a training that differs from one already run only in its seed and run folder loads its own
 config and copies that run; the
 benchmark is measured once (quick) and the later `bench` lines format that run."""
@@ -86,6 +87,16 @@ def shortened(argv: list[str]) -> list[str]:
         n_auvs = re.search(r"-n(\d)\b", name)  # the smoke run flies the README config's N
         if n_auvs and "--n-auvs" not in a:
             a += ["--n-auvs", n_auvs.group(1)]
+    if command == "train-marl":
+        name = a[1].rsplit("/", 1)[-1].removesuffix(".yaml")
+        a[1] = "training/configs/smoke-mappo.yaml"
+        if "--out" not in a:
+            seed = a[_option(a, "--seed") + 1] if "--seed" in a else None
+            a += ["--out", f"runs/{name}" + (f"-seed{seed}" if seed else "")]
+        if "--steps" in a:
+            a[_option(a, "--steps") + 1] = "256"
+        else:
+            a += ["--steps", "256"]
     if command == "bench":
         if "--warp" in a:
             pytest.importorskip("mujoco_warp")
@@ -110,6 +121,10 @@ def test_shortening_keeps_the_command_and_its_options():
     )
     assert shortened(argv) == shlex.split(
         "evaluate --policy greedy --n-auvs 1 2 --nodes 3 --episodes 1 --out r --backend kinematic"
+    )
+    marl = shortened(shlex.split("train-marl training/configs/mappo-n3.yaml"))
+    assert marl == shlex.split(
+        "train-marl training/configs/smoke-mappo.yaml --out runs/mappo-n3 --steps 256"
     )
     train = shortened(shlex.split("train training/configs/ppo-general-n2.yaml --seed 1"))
     smoke = "training/configs/smoke-general.yaml"

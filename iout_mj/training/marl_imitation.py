@@ -12,6 +12,7 @@ is centralised; the actor it teaches is not: it acts on what one AUV observes.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -171,7 +172,7 @@ def warm_start(learner: Learner, env: Any, progress: bool = True) -> dict[str, A
         }
         rounds.append(row)
         if progress:
-            print({"imitation": row}, flush=True)
+            print(json.dumps({"imitation": row}), flush=True)
         if r < im.rounds:
             beta = im.beta / 2**r
             actor = greedy_actor(learner)
