@@ -20,8 +20,13 @@ pytestmark = pytest.mark.slow
 
 PLACEHOLDERS = ("DIR", "RUN")
 """Commands the README gives as a pattern (`figures --results DIR`) are only parsed."""
-TRAININGS = {"ppo-general": "smoke-general.yaml", "ppo-": "smoke.yaml"}
-"""A README training config -> the smoke config of the same policy kind (tokens or MLP)."""
+TRAININGS = {
+    "ppo-general": "smoke-general.yaml",
+    "ppo-": "smoke.yaml",
+    "mappo-": "smoke-mappo.yaml",
+    "ippo-": "smoke-mappo.yaml",
+}
+"""A README training config -> the smoke config of the same policy kind (tokens, MLP, team)."""
 
 
 def readme_commands() -> list[list[str]]:
@@ -72,31 +77,26 @@ def shortened(argv: list[str]) -> list[str]:
             i = _option(a, flag)
             a = a[:i] + a[i + 2 :] if i is not None else a
             a += [flag, value]
-    if command == "train":
-        config = a[1]
-        name = config.rsplit("/", 1)[-1].removesuffix(".yaml")
-        kind = next(v for k, v in TRAININGS.items() if name.startswith(k))
+    if command in ("train", "train-marl"):
+        name = a[1].rsplit("/", 1)[-1].removesuffix(".yaml")
+        marl = command == "train-marl"
+        kind = (
+            "smoke-mappo.yaml"
+            if marl
+            else next(v for k, v in TRAININGS.items() if name.startswith(k))
+        )
         a[1] = f"training/configs/{kind}"
         if "--out" not in a:
             seed = a[_option(a, "--seed") + 1] if "--seed" in a else None
             a += ["--out", f"runs/{name}" + (f"-seed{seed}" if seed else "")]
+        steps = "256" if marl else "128"
         if "--steps" in a:
-            a[_option(a, "--steps") + 1] = "128"
+            a[_option(a, "--steps") + 1] = steps
         else:
-            a += ["--steps", "128"]
+            a += ["--steps", steps]
         n_auvs = re.search(r"-n(\d)\b", name)  # the smoke run flies the README config's N
-        if n_auvs and "--n-auvs" not in a:
+        if n_auvs and "--n-auvs" not in a and not marl:
             a += ["--n-auvs", n_auvs.group(1)]
-    if command == "train-marl":
-        name = a[1].rsplit("/", 1)[-1].removesuffix(".yaml")
-        a[1] = "training/configs/smoke-mappo.yaml"
-        if "--out" not in a:
-            seed = a[_option(a, "--seed") + 1] if "--seed" in a else None
-            a += ["--out", f"runs/{name}" + (f"-seed{seed}" if seed else "")]
-        if "--steps" in a:
-            a[_option(a, "--steps") + 1] = "256"
-        else:
-            a += ["--steps", "256"]
     if command == "bench":
         if "--warp" in a:
             pytest.importorskip("mujoco_warp")

@@ -33,14 +33,21 @@ class Demonstrations:
     """Per episode, its rewards."""
 
     def returns(self, gamma: float, scale: float) -> np.ndarray:
-        out = []
-        for r in self.rewards:
-            g, ret = 0.0, np.empty(len(r))
-            for t in range(len(r) - 1, -1, -1):
-                g = r[t] / scale + gamma * g
-                ret[t] = g
-            out.append(ret)
-        return np.concatenate(out)
+        """Every step's discounted return of the rewards divided by `scale`."""
+        return discounted_returns(self.rewards, gamma, 1.0 / scale)
+
+
+def discounted_returns(rewards: list[np.ndarray], gamma: float, factor: float) -> np.ndarray:
+    """Per step of every episode (concatenated), the discounted return of its rewards times
+    `factor`."""
+    out = []
+    for r in rewards:
+        g, ret = 0.0, np.empty(len(r))
+        for t in range(len(r) - 1, -1, -1):
+            g = r[t] * factor + gamma * g
+            ret[t] = g
+        out.append(ret)
+    return np.concatenate(out)
 
 
 def fly(

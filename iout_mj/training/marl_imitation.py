@@ -23,6 +23,7 @@ import torch
 from torch import nn
 
 from iout_mj.agents.team_policy import ACTION_DIMS, padded_observations, padded_state
+from iout_mj.training.imitation import discounted_returns
 
 if TYPE_CHECKING:
     from iout_mj.training.marl import Learner
@@ -43,14 +44,7 @@ class TeamDemonstrations:
 
     def returns(self, gamma: float, scale: float) -> np.ndarray:
         """The discounted return of the scaled team reward from every step."""
-        out = []
-        for r in self.rewards:
-            g, ret = 0.0, np.empty(len(r))
-            for t in range(len(r) - 1, -1, -1):
-                g = r[t] * scale + gamma * g
-                ret[t] = g
-            out.append(ret)
-        return np.concatenate(out)
+        return discounted_returns(self.rewards, gamma, scale)
 
 
 def fly(
