@@ -14,6 +14,7 @@ from iout_mj.experiments.ray_jobs import load_sweep
 from iout_mj.scenarios import fixed_config, load_config, make_config, random_layout, resolve
 from iout_mj.schema import ConfigError, load_mapping
 from iout_mj.training import TrainConfig
+from iout_mj.training.marl import MarlConfig
 
 
 def test_paper_defaults():
@@ -171,14 +172,19 @@ CONFIGS = Path(__file__).parents[1] / "training" / "configs"
 
 def test_every_shipped_config_loads():
     env_configs = sorted((CONFIGS / "env").glob("*.yaml"))
-    train_configs = sorted(CONFIGS.glob("ppo-*.yaml")) + sorted(CONFIGS.glob("smoke*.yaml"))
-    assert len(env_configs) >= 3 and len(train_configs) >= 6
+    marl_configs = [*CONFIGS.glob("mappo-*.yaml"), *CONFIGS.glob("ippo-*.yaml")]
+    marl_configs.append(CONFIGS / "smoke-mappo.yaml")
+    train_configs = [*CONFIGS.glob("ppo-*.yaml"), *CONFIGS.glob("smoke*.yaml")]
+    train_configs = [p for p in train_configs if p not in marl_configs]
+    assert len(env_configs) >= 3 and len(train_configs) >= 6 and len(marl_configs) >= 5
     overlays = {"realistic-channel-bellhop.yaml": "realistic-channel.yaml"}  # file: its base
     for path in env_configs:
         base = overlays.get(path.name)
         load_config([path] if base is None else [path.with_name(base), path])
     for path in train_configs:
         TrainConfig.load(path)
+    for path in marl_configs:
+        MarlConfig.load(path)
     load_sweep(CONFIGS / "sweep-smoke.yaml")
     assert load_mapping(CONFIGS / "rl-zoo3-ppo.yml", "rl-zoo3 file")
 
