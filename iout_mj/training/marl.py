@@ -10,7 +10,9 @@ too but sees only the AUV's own observation. TorchRL does the rest: `PettingZooW
 n_max and k_max), `Collector`, GAE and `ClipPPOLoss`. The logits of absent nodes are
 masked in the actor (the action mask, from the observation's node-present flags), so the AET and
 uplink nodes are always nodes of the episode. All AUVs of this env end their episode together
-(docking does not remove an agent), so no agent mask is needed.
+(docking does not remove an agent), so no agent mask is needed. With `imitation:` in the
+config, actor and critic are first warm-started by DAgger from a centralised planner
+(`training.marl_imitation`); PPO from scratch does not learn this task.
 
 A run folder holds `checkpoint/` (actor, critic, Adam's state and the counters, in the safe
 policy format), `policy/` (the actor alone: `iout-mj evaluate --policy <out>/policy`) and
