@@ -46,6 +46,13 @@ def _columns(part: str, others: int) -> tuple[np.ndarray, np.ndarray, dict[str, 
     return np.array(fixed), np.array(per, dtype=np.int64).reshape(others, width), first
 
 
+@cache
+def _others(n: int) -> np.ndarray:
+    """(n, n - 1): for each AUV, the other AUVs' indices in order (the AUV token's order)."""
+    rest = [[j for j in range(n) if j != i] for i in range(n)]
+    return np.array(rest, dtype=np.int64).reshape(n, n - 1)
+
+
 OWN_FEATURES = len(_columns("auv", 0)[0])
 """The AUV token's fixed entries."""
 OTHER_FEATURES = _columns("auv", 1)[1].shape[1] + 2
@@ -95,11 +102,9 @@ def agent_observations(
     out[:, at : at + OWN_FEATURES] = auv[:, own_cols]
     at += OWN_FEATURES
     others = out[:, at : at + OTHER_FEATURES * (n_max - 1)].reshape(n, n_max - 1, OTHER_FEATURES)
-    rest = np.array([[j for j in range(n) if j != i] for i in range(n)], dtype=np.int64)
-    rest = rest.reshape(n, n - 1)
     per_other = other_cols.shape[1]
     others[:, : n - 1, :per_other] = auv[:, other_cols]
-    others[:, : n - 1, per_other] = auv[rest, first["docked"]]
+    others[:, : n - 1, per_other] = auv[_others(n), first["docked"]]
     others[:, : n - 1, per_other + 1] = 1.0
     at += OTHER_FEATURES * (n_max - 1)
     nodes = out[:, at : at + NODE_FEATURES * k_max].reshape(n, k_max, NODE_FEATURES)
