@@ -70,7 +70,8 @@ def _policy_help() -> str:
     shipped = ", ".join(shipped_policies())
     return (
         f"{', '.join(BASELINES)}, a shipped policy ({shipped}; ppo-general and mappo pick "
-        "ppo-general-n<N> and mappo-n<N> for the env's N) or a folder"
+        "ppo-general-n<N> and mappo-n<N> for the env's N) or a folder; P+rollout[C] flies a "
+        "general policy P with decision-time search, P+dock any policy with the docking shield"
     )
 
 

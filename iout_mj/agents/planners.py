@@ -178,7 +178,7 @@ class TourScheduler:
         speed, so that the AUV still makes way against it."""
         return FINAL_APPROACH_MPS + float(np.hypot(*mission.state.current_mps))
 
-    def _must_dock(self, mission: Mission) -> BoolArray:
+    def must_dock(self, mission: Mission) -> BoolArray:
         """Head into the dock when the final approach (slowing to the final speed, turning,
         flying to the zone's edge at the ground speeds the current allows) takes all the slots
         left, with `dock_spare_slots` to spare."""
@@ -208,6 +208,22 @@ class TourScheduler:
         )
         return turn_slots + slow_slots + travel_slots + spare >= left
 
+    def dock_approach(self, mission: Mission) -> tuple[IntArray, IntArray]:
+        """Heading and speed indices of every AUV's approach into the dock: cruise far away,
+        the final speed near it, crabbing against the current; facing away from a near dock,
+        a slow turn on a circle that fits the dock zone."""
+        s = mission.state
+        final = self._final_speed(mission)
+        dock_speed = np.clip(
+            approach_speed(s.dock_dist_m, mission.cfg.scenario.slot_s), final, final + 1.0
+        )
+        tight = (_dock_turn_rad(mission) > 2 * np.radians(mission.cfg.motion.dtheta_max_deg)) & (
+            s.dock_dist_m < FINAL_STRETCH_M
+        )
+        dock_speed = np.where(tight, max(0.8, final - FINAL_APPROACH_MPS + 0.3), dock_speed)
+        targets = np.broadcast_to(mission.dock_m, s.positions_m.shape)
+        return steer(mission, targets, dock_speed, crab=True)
+
     def __call__(self, mission: Mission) -> IntArray:
         s, net = mission.state, mission.network
         if self._tours is None or s.slot == 0:
@@ -225,18 +241,11 @@ class TourScheduler:
         dist = np.linalg.norm(targets - s.positions_m, axis=1)
         speed = approach_speed(dist, slot_s)
         loiter = ~touring & (dist < 2 * NODE_REACHED_M)
-        dock = self._must_dock(mission)
-        targets = np.where(dock[:, None], mission.dock_m, targets)
-        final = self._final_speed(mission)
-        dock_speed = np.clip(approach_speed(s.dock_dist_m, slot_s), final, final + 1.0)
-        # facing away from a near dock: turn slowly, on a circle that fits the dock zone
-        tight = (_dock_turn_rad(mission) > 2 * np.radians(mission.cfg.motion.dtheta_max_deg)) & (
-            s.dock_dist_m < FINAL_STRETCH_M
-        )
-        dock_speed = np.where(tight, max(0.8, final - FINAL_APPROACH_MPS + 0.3), dock_speed)
-        speed = np.where(dock, dock_speed, np.where(loiter, 0.8, speed))
-        h, sp = steer(mission, targets, speed, crab=True)
-        h = np.where(loiter & ~dock, mission.cfg.motion.heading_levels - 1, h)  # circle
+        dock = self.must_dock(mission)
+        h, sp = steer(mission, targets, np.where(loiter, 0.8, speed), crab=True)
+        h = np.where(loiter, mission.cfg.motion.heading_levels - 1, h)  # circle
+        dock_h, dock_sp = self.dock_approach(mission)
+        h, sp = np.where(dock, dock_h, h), np.where(dock, dock_sp, sp)
         d = pairwise_distance_m(s.positions_m, nodes)
         wet = np.array([t[0] if t else 0 for t in self._tours], dtype=np.int64)
         wet = np.where(touring, wet, d.argmin(axis=1))

@@ -28,6 +28,7 @@ from iout_mj.agents.policy_format import (
     save_policy,
 )
 from iout_mj.agents.registry import POLICIES, make_policy
+from iout_mj.agents.shield import DOCK_SUFFIX, DockShield
 from iout_mj.agents.shipped import SHIPPED_DIR, shipped_policies
 from iout_mj.agents.team_policy import ACTION_DIMS, TeamPolicy, check_fit, team_observation_size
 from iout_mj.config import Config
@@ -195,12 +196,15 @@ def split_search(name: str) -> tuple[str, int | None]:
 
 def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) -> Any:
     """A callable `policy(env, obs) -> action`: a baseline name or a trained policy (name or
-    folder), checked against `env`; `P+rollout[C]` is P improved by rollouts (`search`)."""
+    folder), checked against `env`; `P+rollout[C]` is P improved by rollouts (`search`),
+    `P+dock` is P with the docking shield (`shield`)."""
     if not isinstance(name, str) or not name:
         raise PolicyError(
             f"policy {name!r}: accepted a name ({', '.join(POLICIES)}, a shipped policy "
             f"{shipped_policies()}) or a policy folder, as a non-empty string"
         )
+    if name.endswith(DOCK_SUFFIX) and len(name) > len(DOCK_SUFFIX):
+        return DockShield(load_policy(name[: -len(DOCK_SUFFIX)], env, seed, trust_pickle))
     base, candidates = split_search(name)
     if candidates is not None:
         from iout_mj.agents.search import RolloutSearch  # the batch: imported when searched

@@ -1,0 +1,81 @@
+"""The docking shield (`agents.shield`, `P+dock`): it docks a policy that never heads home,
+leaves every node choice and every action before homing to the policy, and is reachable by
+name, training seeds included."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from iout_mj.agents.policies import load_policy
+from iout_mj.agents.rollout import run_episode
+from iout_mj.agents.shield import DockShield
+from iout_mj.errors import PolicyError
+from iout_mj.experiments.evaluate import learned, seed_variant
+
+
+def _env(n_auvs: int = 2, n_nodes: int = 11) -> gym.Env:
+    return gym.make(
+        "iout_mj/MultiAUV-v0", backend="kinematic", n_auvs=n_auvs, n_nodes=n_nodes, layout="random"
+    )
+
+
+def test_the_shield_docks_a_policy_that_never_heads_home():
+    env = _env()
+    alone, shielded = [], []
+    for seed in range(5):
+        alone += run_episode(env, load_policy("random-walk", env, seed), seed)["docked"]
+        metrics = run_episode(env, load_policy("random-walk+dock", env, seed), seed)
+        shielded += metrics["docked"]
+        assert np.isfinite(metrics["mean_aoi_horizon"])
+    assert sum(alone) <= 2  # a random walk reaches the dock zone by chance, rarely
+    assert all(shielded)
+
+
+class _Recorder:
+    """A base policy that remembers what it chose."""
+
+    def __init__(self, env: gym.Env) -> None:
+        self.policy = load_policy("random-walk", env, 0)
+        self.chosen: list[np.ndarray] = []
+
+    def reset(self, seed):
+        self.policy.reset(seed)
+
+    def __call__(self, env, obs):
+        action = np.asarray(self.policy(env, obs))
+        self.chosen.append(action.reshape(env.unwrapped.mission.n_auvs, -1).copy())
+        return action
+
+
+def test_the_shield_overrides_only_heading_and_speed_and_only_once_homing():
+    env = _env()
+    base = _Recorder(env)
+    shield = DockShield(base)
+    obs, _ = env.reset(seed=4)
+    shield.reset(4)
+    flown, done = [], False
+    while not done:
+        action = shield(env, obs)
+        flown.append(action.reshape(2, -1))
+        obs, _, terminated, truncated, _ = env.step(action)
+        done = terminated or truncated
+    chosen, flown = np.array(base.chosen), np.array(flown)
+    assert np.array_equal(flown[:, :, 2:], chosen[:, :, 2:])  # the node choices: the policy's
+    overridden = (flown[:, :, :2] != chosen[:, :, :2]).any(axis=2)
+    assert overridden.any()
+    for i in range(2):  # before an AUV heads home, its motion is the policy's
+        first = int(np.argmax(overridden[:, i])) if overridden[:, i].any() else len(flown)
+        assert np.array_equal(flown[:first, i, :2], chosen[:first, i, :2])
+        assert first > 10  # a random walk is shielded near the end, not from the start
+
+
+def test_a_shielded_policy_is_named_like_its_base():
+    assert learned("mappo+dock") and learned("ppo-general+dock")
+    assert not learned("greedy+dock")
+    assert seed_variant("mappo+dock", 2, 3) == "mappo-n3-seed2+dock"
+    assert seed_variant("mappo+dock", 0, 3) == "mappo+dock"
+    env = _env()
+    with pytest.raises(PolicyError, match="accepted"):
+        load_policy("+dock", env)
+    with pytest.raises(PolicyError, match="accepted"):
+        load_policy("no-such-policy+dock", env)
