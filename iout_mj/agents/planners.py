@@ -141,6 +141,9 @@ class TourScheduler:
     dock_spare_slots = 2.0
     """Slots to spare when deciding to head into the dock (a teacher for imitation may keep
     more, so that its pupil's timing errors do not make it late)."""
+    slow_turn_within_m = FINAL_STRETCH_M
+    """Facing away from the dock within this distance, the approach turns slowly first (the
+    planner never faces away from a far dock; a shielded policy may)."""
 
     def reset(self, seed: int | None = None) -> None:
         self._tours: list[list[int]] | None = None
@@ -218,7 +221,7 @@ class TourScheduler:
             approach_speed(s.dock_dist_m, mission.cfg.scenario.slot_s), final, final + 1.0
         )
         tight = (_dock_turn_rad(mission) > 2 * np.radians(mission.cfg.motion.dtheta_max_deg)) & (
-            s.dock_dist_m < FINAL_STRETCH_M
+            s.dock_dist_m < self.slow_turn_within_m
         )
         dock_speed = np.where(tight, max(0.8, final - FINAL_APPROACH_MPS + 0.3), dock_speed)
         targets = np.broadcast_to(mission.dock_m, s.positions_m.shape)

@@ -1,7 +1,8 @@
 """A docking shield: any policy P as `P+dock`, with each AUV's heading and speed taken over by
 `tour-scheduler`'s docking approach from the slot at which it must head into the dock to arrive
 before the horizon (its final approach at the ground speeds the current allows, with
-`TourScheduler.dock_spare_slots` to spare). P still picks every AET and uplink node.
+`TourScheduler.dock_spare_slots` to spare; facing away from the dock, a slow turn first, at
+any distance). P still picks every AET and uplink node.
 
 The rule reads an AUV's own position, heading and speed setpoints, the current it drifts in
 and the clock, so a shielded decentralised policy stays decentralised. Once an AUV heads home
@@ -30,6 +31,7 @@ class DockShield:
     def __init__(self, base: EnvPolicy) -> None:
         self.base = base
         self.planner = TourScheduler()
+        self.planner.slow_turn_within_m = np.inf  # a policy may face away from a far dock
         self._homing: BoolArray | None = None
 
     def reset(self, seed: int | None) -> None:
