@@ -6,6 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from iout_mj.agents.baselines import steer
 from iout_mj.agents.policies import load_policy
 from iout_mj.agents.rollout import run_episode
 from iout_mj.agents.shield import DockShield
@@ -79,3 +80,31 @@ def test_a_shielded_policy_is_named_like_its_base():
         load_policy("+dock", env)
     with pytest.raises(PolicyError, match="accepted"):
         load_policy("no-such-policy+dock", env)
+
+
+class _StraightHome:
+    """Flies at the dock at cruise speed from the first slot (and so docks early)."""
+
+    def __call__(self, env, obs):
+        m = env.unwrapped.mission
+        heading, speed = steer(m, np.broadcast_to(m.dock_m, m.state.positions_m.shape), 3.0)
+        zeros = np.zeros_like(heading)
+        return np.stack([heading, speed, zeros, zeros], axis=1).ravel()
+
+
+def test_an_auv_enters_the_dock_zone_only_once_it_heads_home():
+    env = _env()
+    alone = run_episode(env, _StraightHome(), 0)
+    assert all(alone["docked"]) and alone["mission_slots"] < 30  # docked early, unshielded
+    shield = DockShield(_StraightHome())
+    obs, _ = env.reset(seed=0)
+    shield.reset(0)
+    mission, done = env.unwrapped.mission, False
+    while not done:
+        homing_before = np.zeros(2, bool) if shield._homing is None else shield._homing.copy()
+        obs, _, terminated, truncated, info = env.step(shield(env, obs))
+        newly = np.asarray(mission.observation()["docked"]) > 0.5
+        assert not (newly & ~shield._homing).any()  # no AUV docked before heading home
+        done = terminated or truncated
+    assert all(info["metrics"]["docked"])
+    assert info["metrics"]["mission_slots"] > alone["mission_slots"] + 15

@@ -141,6 +141,9 @@ class TourScheduler:
     dock_spare_slots = 2.0
     """Slots to spare when deciding to head into the dock (a teacher for imitation may keep
     more, so that its pupil's timing errors do not make it late)."""
+    top_approach_mps: float | None = None
+    """Top speed of the approach into the dock; None: the final speed plus 1 m/s (the planner
+    heads home from near the nodes' centroid)."""
     slow_turn_within_m = FINAL_STRETCH_M
     """Facing away from the dock within this distance, the approach turns slowly first (the
     planner never faces away from a far dock; a shielded policy may)."""
@@ -217,9 +220,8 @@ class TourScheduler:
         a slow turn on a circle that fits the dock zone."""
         s = mission.state
         final = self._final_speed(mission)
-        dock_speed = np.clip(
-            approach_speed(s.dock_dist_m, mission.cfg.scenario.slot_s), final, final + 1.0
-        )
+        top = final + 1.0 if self.top_approach_mps is None else max(self.top_approach_mps, final)
+        dock_speed = np.clip(approach_speed(s.dock_dist_m, mission.cfg.scenario.slot_s), final, top)
         tight = (_dock_turn_rad(mission) > 2 * np.radians(mission.cfg.motion.dtheta_max_deg)) & (
             s.dock_dist_m < self.slow_turn_within_m
         )

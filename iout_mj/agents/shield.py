@@ -2,7 +2,10 @@
 `tour-scheduler`'s docking approach from the slot at which it must head into the dock to arrive
 before the horizon (its final approach at the ground speeds the current allows, with
 `TourScheduler.dock_spare_slots` to spare; facing away from the dock, a slow turn first, at
-any distance). P still picks every AET and uplink node.
+any distance, then cruise speed until the final stretch). Before an AUV heads home it is kept
+out of the dock zone (it would dock there for good under the zone-entry rule): a move that
+could lead in is replaced by the nearest one that keeps it out. P still picks every AET and
+uplink node.
 
 The rule reads an AUV's own position, heading and speed setpoints, the current it drifts in
 and the clock, so a shielded decentralised policy stays decentralised. Once an AUV heads home
@@ -17,10 +20,13 @@ from typing import Any
 
 import numpy as np
 
+from iout_mj.agents.baselines import CRUISE_MPS
 from iout_mj.agents.planners import TourScheduler
 from iout_mj.agents.rollout import EnvPolicy
-from iout_mj.types import BoolArray
+from iout_mj.types import BoolArray, IntArray
 
+KEEP_OUT_MARGIN_M = 10.0
+"""Clearance from the dock zone kept by an AUV not yet heading home."""
 DOCK_SUFFIX = "+dock"
 """`<policy>+dock`: the policy with the docking shield."""
 
@@ -31,7 +37,10 @@ class DockShield:
     def __init__(self, base: EnvPolicy) -> None:
         self.base = base
         self.planner = TourScheduler()
-        self.planner.slow_turn_within_m = np.inf  # a policy may face away from a far dock
+        # a policy may head home from anywhere, facing away: turn slowly, then cruise (the
+        # docking decision's own model of the approach)
+        self.planner.slow_turn_within_m = np.inf
+        self.planner.top_approach_mps = CRUISE_MPS
         self._homing: BoolArray | None = None
 
     def reset(self, seed: int | None) -> None:
@@ -49,4 +58,44 @@ class DockShield:
         heading, speed = self.planner.dock_approach(mission)
         action[self._homing, 0] = heading[self._homing]
         action[self._homing, 1] = speed[self._homing]
+        _keep_out(mission, action, ~self._homing)
         return action.ravel()
+
+
+def _moves(
+    mission: Any, positions_m: np.ndarray, heading_rad: np.ndarray, speed_mps: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """End positions (..., H, S, 2), headings and speeds (..., H, S) of one slot from the given
+    states (...) for every pair of heading and speed indices: the straight move plus the
+    current's drift, as the compiled rules move an AUV."""
+    a, slot_s = mission.actions, mission.cfg.scenario.slot_s
+    heading = heading_rad[..., None, None] + a.dtheta_rad[:, None]
+    speed = np.clip(speed_mps[..., None, None] + a.dv_mps, 0.0, mission.cfg.motion.v_max_mps)
+    heading, speed = np.broadcast_arrays(heading, speed)
+    velocity = speed[..., None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+    ends = positions_m[..., None, None, :] + (velocity + mission.state.current_mps) * slot_s
+    return ends, heading, speed
+
+
+def _keep_out(mission: Any, action: IntArray, outside: BoolArray) -> None:
+    """Change in place the heading and speed indices of the AUVs flagged `outside` whose move
+    this slot could lead into the dock zone: to the nearest pair of indices after which the
+    AUV ends the slot, and can end the next one, farther than `KEEP_OUT_MARGIN_M` from the
+    zone (an AUV with no such pair keeps its choice)."""
+    s, radius_m = mission.state, mission.cfg.scenario.dock_radius_m + KEEP_OUT_MARGIN_M
+    ends, heading, speed = _moves(mission, s.positions_m, s.heading_sp, s.speed_sp)
+    then, _, _ = _moves(mission, ends, heading, speed)  # (N, H, S, H, S, 2)
+    clear_now = np.linalg.norm(ends - mission.dock_m, axis=-1) > radius_m
+    clear_then = (np.linalg.norm(then - mission.dock_m, axis=-1) > radius_m).any(axis=(-2, -1))
+    clear = clear_now & clear_then
+    h_levels, v_levels = np.arange(clear.shape[1]), np.arange(clear.shape[2])
+    change = (
+        np.abs(h_levels[None, :, None] - action[:, 0, None, None])
+        + np.abs(v_levels[None, None, :] - action[:, 1, None, None])
+    ).astype(float)
+    change[~clear] = np.inf
+    rows = np.arange(len(action))
+    blocked = outside & ~clear[rows, action[:, 0], action[:, 1]] & clear.any(axis=(1, 2))
+    h, v = np.unravel_index(change.reshape(len(action), -1).argmin(axis=1), clear.shape[1:])
+    action[blocked, 0] = h[blocked]
+    action[blocked, 1] = v[blocked]
