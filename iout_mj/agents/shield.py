@@ -2,10 +2,10 @@
 `tour-scheduler`'s docking approach from the slot at which it must head into the dock to arrive
 before the horizon (its final approach at the ground speeds the current allows, with
 `TourScheduler.dock_spare_slots` to spare; facing away from the dock, a slow turn first, at
-any distance, then cruise speed until the final stretch). Until a few slots before an AUV
-must head home it is kept out of the dock zone (it would dock there for good under the
-zone-entry rule): a move that could lead in is replaced by the nearest one that keeps it out.
-P still picks every AET and uplink node.
+any distance, then cruise speed until the final stretch). Until it must head home (in a
+current: a few slots before) an AUV is kept out of the dock zone, where it would dock for good
+under the zone-entry rule: a move that could lead in is replaced by the nearest one that keeps
+it out. P still picks every AET and uplink node.
 
 The rule reads an AUV's own position, heading and speed setpoints, the current it drifts in
 and the clock, so a shielded decentralised policy stays decentralised. Once an AUV heads home
@@ -27,9 +27,9 @@ from iout_mj.types import BoolArray, IntArray
 
 KEEP_OUT_MARGIN_M = 10.0
 """Clearance from the dock zone kept by an AUV not yet heading home."""
-KEEP_OUT_RELEASE_SLOTS = 6.0
-"""An AUV this many slots before it must head home may enter the zone (its approach from the
-zone's edge, against a strong current, could orbit the zone instead)."""
+KEEP_OUT_RELEASE_SLOTS_PER_MPS = 6.0
+"""An AUV this many slots per m/s of current before it must head home may enter the zone (its
+approach from the zone's edge, against a strong current, could orbit the zone instead)."""
 DOCK_SUFFIX = "+dock"
 """`<policy>+dock`: the policy with the docking shield."""
 
@@ -45,7 +45,6 @@ class DockShield:
         self.planner.slow_turn_within_m = np.inf
         self.planner.top_approach_mps = CRUISE_MPS
         self.release = TourScheduler()
-        self.release.dock_spare_slots = self.planner.dock_spare_slots + KEEP_OUT_RELEASE_SLOTS
         self._homing: BoolArray | None = None
 
     def reset(self, seed: int | None) -> None:
@@ -63,6 +62,10 @@ class DockShield:
         heading, speed = self.planner.dock_approach(mission)
         action[self._homing, 0] = heading[self._homing]
         action[self._homing, 1] = speed[self._homing]
+        current_mps = float(np.hypot(*mission.state.current_mps))
+        self.release.dock_spare_slots = (
+            self.planner.dock_spare_slots + KEEP_OUT_RELEASE_SLOTS_PER_MPS * current_mps
+        )
         _keep_out(mission, action, ~(self._homing | self.release.must_dock(mission)))
         return action.ravel()
 
