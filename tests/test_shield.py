@@ -101,10 +101,32 @@ def test_an_auv_enters_the_dock_zone_only_once_it_heads_home():
     shield.reset(0)
     mission, done = env.unwrapped.mission, False
     while not done:
-        homing_before = np.zeros(2, bool) if shield._homing is None else shield._homing.copy()
         obs, _, terminated, truncated, info = env.step(shield(env, obs))
         newly = np.asarray(mission.observation()["docked"]) > 0.5
         assert not (newly & ~shield._homing).any()  # no AUV docked before heading home
         done = terminated or truncated
     assert all(info["metrics"]["docked"])
     assert info["metrics"]["mission_slots"] > alone["mission_slots"] + 15
+
+
+def test_a_shielded_auvs_motion_depends_on_its_own_state_only():
+    """Decentralised: moving the other AUV (anywhere, facing anywhere) changes nothing of what
+    the shield does to an AUV's heading and speed, near the dock and far from it."""
+    env = _env()
+    env.reset(seed=5)
+    mission = env.unwrapped.mission
+    s = mission.state
+    # heading at the dock from 150 m before it must head home (keep-out); late and far (homing)
+    for slot, own_xy in ((30, (760.0, 700.0)), (50, (300.0, 300.0))):
+        s.slot[...] = slot
+        s.positions_m[0] = own_xy
+        s.heading_sp[0], s.speed_sp[0] = 1.08, 2.5
+        rows = []
+        for other_xy, other_heading in (((100.0, 900.0), 0.0), ((820.0, 760.0), 2.0)):
+            s.positions_m[1] = other_xy
+            s.heading_sp[1] = other_heading
+            s.dock_dist_m[:] = np.linalg.norm(s.positions_m - mission.dock_m, axis=1)
+            shield = DockShield(lambda e, o: np.tile([5, 3, 0, 0], 2))
+            rows.append(shield(env, None).reshape(2, 4)[0])
+        assert np.array_equal(rows[0], rows[1])
+        assert not np.array_equal(rows[0][:2], [5, 3])  # the shield acted on AUV 0
