@@ -1,7 +1,7 @@
 """A docking shield: any policy P as `P+dock`, with each AUV's heading and speed taken over by
 `tour-scheduler`'s docking approach from the slot at which it must head into the dock to arrive
 before the horizon (its final approach at the ground speeds the current allows, with
-`TourScheduler.dock_spare_slots` to spare; facing away from the dock, a slow turn first, at
+`DOCK_SPARE_SLOTS` to spare; facing away from the dock, a slow turn first, at
 any distance, then cruise speed until the final stretch). Until it must head home (in a
 current: a few slots before) an AUV is kept out of the dock zone, where it would dock for good
 under the zone-entry rule: a move that could lead in is replaced by the nearest one that keeps
@@ -25,6 +25,9 @@ from iout_mj.agents.planners import TourScheduler
 from iout_mj.agents.rollout import EnvPolicy
 from iout_mj.types import BoolArray, IntArray
 
+DOCK_SPARE_SLOTS = 4.0
+"""Slots to spare at the decision to head home (the planner keeps 2: it heads home from near
+the nodes' centroid, while a policy may be anywhere, at any speed, facing away)."""
 KEEP_OUT_MARGIN_M = 10.0
 """Clearance from the dock zone kept by an AUV not yet heading home."""
 KEEP_OUT_RELEASE_SLOTS_PER_MPS = 6.0
@@ -40,6 +43,7 @@ class DockShield:
     def __init__(self, base: EnvPolicy) -> None:
         self.base = base
         self.planner = TourScheduler()
+        self.planner.dock_spare_slots = DOCK_SPARE_SLOTS
         # a policy may head home from anywhere, facing away: turn slowly, then cruise (the
         # docking decision's own model of the approach)
         self.planner.slow_turn_within_m = np.inf
