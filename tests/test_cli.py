@@ -337,8 +337,12 @@ def test_ctrl_c_ends_an_evaluation_and_its_workers_quietly(tmp_path):
         text=True,
         start_new_session=True,
     )
-    err_lines: list[str] = []  # stderr read as it comes: the progress bar says when it runs
-    reader = threading.Thread(target=lambda: err_lines.extend(iter(proc.stderr.readline, "")))
+    # stderr read as it comes, character by character (the progress bar ends its updates with
+    # a carriage return, not a newline): the bar says when the episodes run
+    err_lines: list[str] = []
+    reader = threading.Thread(
+        target=lambda: err_lines.extend(iter(lambda: proc.stderr.read(1), ""))
+    )
     reader.start()
     deadline = time.monotonic() + 120
     while not re.search(r"\| [1-9]\d*/\d+", "".join(err_lines)) and time.monotonic() < deadline:
