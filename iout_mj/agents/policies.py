@@ -28,7 +28,7 @@ from iout_mj.agents.policy_format import (
     save_policy,
 )
 from iout_mj.agents.registry import POLICIES, make_policy
-from iout_mj.agents.shield import DOCK_SUFFIX, DockShield
+from iout_mj.agents.shield import DockShield, split_shield
 from iout_mj.agents.shipped import SHIPPED_DIR, shipped_policies
 from iout_mj.agents.team_policy import ACTION_DIMS, TeamPolicy, check_fit, team_observation_size
 from iout_mj.config import Config
@@ -203,8 +203,9 @@ def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) 
             f"policy {name!r}: accepted a name ({', '.join(POLICIES)}, a shipped policy "
             f"{shipped_policies()}) or a policy folder, as a non-empty string"
         )
-    if name.endswith(DOCK_SUFFIX) and len(name) > len(DOCK_SUFFIX):
-        return DockShield(load_policy(name[: -len(DOCK_SUFFIX)], env, seed, trust_pickle))
+    unshielded, shielded = split_shield(name)
+    if shielded:
+        return DockShield(load_policy(unshielded, env, seed, trust_pickle))
     base, candidates = split_search(name)
     if candidates is not None:
         from iout_mj.agents.search import RolloutSearch  # the batch: imported when searched

@@ -37,6 +37,12 @@ DOCK_SUFFIX = "+dock"
 """`<policy>+dock`: the policy with the docking shield."""
 
 
+def split_shield(name: str) -> tuple[str, bool]:
+    """(the policy, whether it is shielded) of a policy name: `P+dock` -> (P, True)."""
+    base = name.removesuffix(DOCK_SUFFIX)
+    return (base, True) if base and base != name else (name, False)
+
+
 class DockShield:
     """`policy(env, obs) -> action` (`rollout.EnvPolicy`): `base` with the docking shield."""
 

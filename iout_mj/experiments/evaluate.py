@@ -39,7 +39,7 @@ from iout_mj.agents.policies import (
 from iout_mj.agents.policy_format import MANIFEST
 from iout_mj.agents.registry import POLICIES
 from iout_mj.agents.rollout import run_episode
-from iout_mj.agents.shield import DOCK_SUFFIX
+from iout_mj.agents.shield import DOCK_SUFFIX, split_shield
 from iout_mj.envs import ENV_ID
 from iout_mj.errors import (
     MAX_SEED,
@@ -211,7 +211,7 @@ def _jobs(
 def learned(name: str) -> bool:
     """Whether a policy name is a trained policy (it has training seeds), not a baseline
     (shielded or not)."""
-    return name.removesuffix(DOCK_SUFFIX) not in POLICIES
+    return split_shield(name)[0] not in POLICIES
 
 
 def seed_variant(name: str, training_seed: int, n_auvs: int) -> str:
@@ -223,8 +223,9 @@ def seed_variant(name: str, training_seed: int, n_auvs: int) -> str:
     `runs/gen-seed0/best` -> `runs/gen-seed<k>/best`)."""
     if training_seed == 0:
         return name
-    if name.endswith(DOCK_SUFFIX):  # P+dock: training seed k of P, shielded
-        return seed_variant(name.removesuffix(DOCK_SUFFIX), training_seed, n_auvs) + DOCK_SUFFIX
+    unshielded, shielded = split_shield(name)
+    if shielded:  # P+dock: training seed k of P, shielded
+        return seed_variant(unshielded, training_seed, n_auvs) + DOCK_SUFFIX
     base, candidates = split_search(name)
     if candidates is not None:  # P+rollout: training seed k of P, searched the same way
         return seed_variant(base, training_seed, n_auvs) + name[len(base) :]
