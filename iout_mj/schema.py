@@ -167,6 +167,10 @@ def convert(tp: Any, value: Any, name: str) -> Any:
         if not isinstance(value, str):
             raise ConfigError(f"{name}={shown(value)} has the wrong type: accepted a string")
         return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name}={shown(value)} has the wrong type: accepted true or false")
+        return value
     raise ConfigError(f"{name}: unsupported field type {tp}")
 
 
@@ -178,7 +182,7 @@ def field_types(cls: Any) -> dict[str, Any]:
 
 def check_types(config: Any) -> None:
     """A config built in code is checked as one read from a file: every field against its
-    annotation (integers, numbers, strings, lists, sections), before any range check; lists
+    annotation (integers, numbers, strings, booleans, lists, sections), before any range check; lists
     become tuples and mappings sections, as when read (`schema.build_dataclass`)."""
     cls: Any = type(config)
     hints = field_types(cls)

@@ -130,6 +130,20 @@ def test_team_env_passes_the_pettingzoo_api_and_draws_k_per_episode():
         env.step({a: np.array([5, 3, 0, k]) for a in env.agents})
 
 
+def test_a_shielded_team_env_docks_every_auv_whatever_the_actor_does():
+    """Training under the shield: random joint actions fly shielded, and every AUV docks (the
+    unshielded random walk docks in at most 2 of 10 AUV-episodes: tests/test_shield.py)."""
+    env = TeamEnv(replace(tiny(), shield=True), "kinematic", seed=0)
+    rng = np.random.default_rng(0)
+    for seed in range(4):
+        env.reset(seed=seed)
+        mission = env.current.mission
+        while env.agents:
+            high = [11, 7, mission.n_nodes, mission.n_nodes]
+            env.step({a: rng.integers(0, high) for a in env.agents})
+        assert all(mission.metrics()["docked"]), seed
+
+
 def test_the_action_mask_keeps_nodes_to_those_present():
     logits = torch.zeros(500, 2, 11 + 7 + 6 + 6)
     present = torch.tensor([1.0, 1.0, 1.0, 0.0, 0.0, 0.0]).expand(500, 2, 6)
@@ -149,6 +163,9 @@ def test_training_saves_resumes_and_the_policy_flies_n_2_to_4(tmp_path, algorith
     curve = json.loads((tmp_path / "curve.json").read_text())
     assert [r["agent_steps"] for r in curve["curve"]] == [128, 256]
     assert curve["greedy"]["kinematic"]["docked_rate"] == 1.0
+    best = min(curve["curve"], key=lambda r: (-r["docked_rate"], r["mean_aoi_horizon"]))
+    assert curve["best"]["agent_steps"] == best["agent_steps"]
+    assert (tmp_path / "best" / "policy.json").is_file()
 
     env = gym.make(ENV_ID, backend="kinematic", n_auvs=2, n_nodes=6, layout="random")
     env.reset(seed=0)

@@ -44,9 +44,10 @@ def split_shield(name: str) -> tuple[str, bool]:
 
 
 class DockShield:
-    """`policy(env, obs) -> action` (`rollout.EnvPolicy`): `base` with the docking shield."""
+    """`policy(env, obs) -> action` (`rollout.EnvPolicy`): `base` with the docking shield;
+    without a base, `apply` shields the actions an env is given (training under the shield)."""
 
-    def __init__(self, base: EnvPolicy) -> None:
+    def __init__(self, base: EnvPolicy | None = None) -> None:
         self.base = base
         self.planner = TourScheduler()
         self.planner.dock_spare_slots = DOCK_SPARE_SLOTS
@@ -64,8 +65,13 @@ class DockShield:
             reset(seed)
 
     def __call__(self, env: Any, obs: np.ndarray) -> np.ndarray:
+        assert self.base is not None, "DockShield() without a base shields with apply()"
         mission = env.unwrapped.mission
         action = np.array(self.base(env, obs), dtype=np.int64).reshape(mission.n_auvs, -1)
+        return self.apply(mission, action).ravel()
+
+    def apply(self, mission: Any, action: IntArray) -> IntArray:
+        """Shield the (N, 4) joint action `action` in place for this slot of `mission`."""
         if self._homing is None or mission.state.slot == 0:
             self._homing = np.zeros(mission.n_auvs, dtype=bool)
         self._homing |= self.planner.must_dock(mission)
@@ -77,7 +83,7 @@ class DockShield:
             self.planner.dock_spare_slots + KEEP_OUT_RELEASE_SLOTS_PER_MPS * current_mps
         )
         _keep_out(mission, action, ~(self._homing | self.release.must_dock(mission)))
-        return action.ravel()
+        return action
 
 
 def _moves(

@@ -15,10 +15,11 @@ config, actor and critic are first warm-started by DAgger from a centralised pla
 (`training.marl_imitation`); PPO from scratch does not learn this task.
 
 A run folder holds `checkpoint/` (actor, critic, Adam's state and the counters, in the safe
-policy format), `policy/` (the actor alone: `iout-mj evaluate --policy <out>/policy`) and
-`curve.json` (held-out evaluations against greedy on the same episodes). `--resume` continues
-from the checkpoint: the same weights, optimiser state and counters; the env's episodes then
-draw from a seed that depends on the batches done.
+policy format), `policy/` (the actor alone: `iout-mj evaluate --policy <out>/policy`), `best/`
+(the actor of the best held-out evaluation: docking first, then AoI) and `curve.json`
+(held-out evaluations against greedy on the same episodes). `--resume` continues from the
+checkpoint: the same weights, optimiser state and counters; the env's episodes then draw from a
+seed that depends on the batches done.
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ from iout_mj.agents.policy_format import (
 )
 from iout_mj.agents.registry import make_policy
 from iout_mj.agents.rollout import run_episode
+from iout_mj.agents.shield import DockShield
 from iout_mj.agents.team_policy import (
     TeamPolicy,
     masked_logits,
@@ -92,7 +94,7 @@ from iout_mj.training.trainer import HELD_OUT_SEED
 ALGORITHMS = ("mappo", "ippo")
 GROUP = "auvs"
 OBS, ACTION = (GROUP, "observation"), (GROUP, "action")
-CHECKPOINT, POLICY, CURVE = "checkpoint", "policy", "curve.json"
+CHECKPOINT, POLICY, BEST, CURVE = "checkpoint", "policy", "best", "curve.json"
 MAX_AGENT_STEPS = 10**10
 MAX_AUVS = 16
 
@@ -133,6 +135,10 @@ class MarlConfig:
     imitation: ImitationConfig | None = None
     """Warm start of actor and critic by DAgger from a centralised planner before PPO
     (`training.marl_imitation`); null: PPO from scratch."""
+    shield: bool = False
+    """Train and evaluate under the docking shield (`agents.shield`): the env flies every
+    joint action shielded, so an AUV's docking is the shield's and its reward is the AoI's;
+    the policy then flies as `<policy>+dock`."""
     phases: tuple[MarlPhase, ...] = (MarlPhase(),)
     steps_per_batch: int = 2048
     """Joint steps (TorchRL frames) collected per PPO iteration."""
@@ -235,6 +241,7 @@ class TeamEnv(ParallelEnv):
         shape = (state_size(cfg.n_max, cfg.k_max),)
         self.state_space = gym.spaces.Box(OBS_LOW, OBS_HIGH, shape=shape, dtype=np.float32)
         self.current = self._env(cfg.node_range[0])
+        self.shield = DockShield() if cfg.shield else None
 
     def observation_space(self, agent: str) -> gym.spaces.Box:
         return self._obs_space
@@ -277,6 +284,11 @@ class TeamEnv(ParallelEnv):
                     f"actions[{agent!r}] names node {nodes.tolist()} in an episode of K={k} "
                     f"nodes: accepted node indices from 0 to {k - 1}"
                 )
+        if self.shield is not None:
+            agents = self.possible_agents
+            joint = np.stack([np.asarray(actions[a], dtype=np.int64) for a in agents])
+            joint = self.shield.apply(self.current.mission, joint)
+            actions = {a: joint[i] for i, a in enumerate(agents)}
         _, rewards, term, trunc, _ = self.current.step(actions)
         obs = self._observe()
         if any(term.values()) or any(trunc.values()):
@@ -507,6 +519,12 @@ def team_manifest(cfg: MarlConfig) -> dict[str, Any]:
     }
 
 
+def flown_policy(learner: Learner) -> Any:
+    """The current actor as it is evaluated: shielded when it trains under the shield."""
+    policy = team_policy(learner)
+    return DockShield(policy) if learner.cfg.shield else policy
+
+
 def team_policy(learner: Learner) -> TeamPolicy:
     """The current actor as a `TeamPolicy` (what `export` stores), without a file."""
     cfg = learner.cfg
@@ -619,6 +637,21 @@ def _write_json(path: Path, data: Any) -> None:
     path.write_text(json.dumps(data, indent=2) + "\n")
 
 
+def record(
+    learner: Learner, out: Path, run: dict[str, Any], row: dict[str, Any], progress: bool
+) -> None:
+    """Add a held-out evaluation to the run's curve and write the checkpoint; the actor goes to
+    `best/` too when it is the best so far: the highest docking share, then the lowest AoI."""
+    run["curve"].append(row)
+    if progress:
+        print(json.dumps(row), flush=True)
+    rank = [-row["docked_rate"], row["mean_aoi_horizon"]]
+    if "best" not in run or rank < run["best"]["rank"]:
+        run["best"] = {"agent_steps": row["agent_steps"], "rank": rank}
+        export(learner, out / BEST)
+    export(learner, out / CHECKPOINT, checkpoint_tensors(learner), run)
+
+
 def train_marl(
     cfg: MarlConfig, out: Path, resume: bool = False, progress: bool = True
 ) -> dict[str, Any]:
@@ -645,11 +678,8 @@ def train_marl(
         run["imitation"] = marl_imitation.warm_start(learner, env, progress)
         env.close()
         row = {"agent_steps": 0, "seconds": 0.0, "backend": "kinematic"}
-        row |= fly(cfg, team_policy(learner), episodes, "kinematic")
-        run["curve"].append(row)
-        if progress:
-            print(json.dumps(row), flush=True)
-        export(learner, out / CHECKPOINT, checkpoint_tensors(learner), run)
+        row |= fly(cfg, flown_policy(learner), episodes, "kinematic")
+        record(learner, out, run, row, progress)
     batch_index = 0
     for phase in cfg.phases:
         frames = cfg.frames(phase)
@@ -679,13 +709,10 @@ def train_marl(
                     "agent_steps": run["agent_steps"],
                     "seconds": round(run["seconds"], 1),
                     "backend": phase.backend,
-                    **fly(cfg, team_policy(learner), episodes, phase.backend),
+                    **fly(cfg, flown_policy(learner), episodes, phase.backend),
                     **terms,
                 }
-                run["curve"].append(row)
-                if progress:
-                    print(json.dumps(row), flush=True)
-                export(learner, out / CHECKPOINT, checkpoint_tensors(learner), run)
+                record(learner, out, run, row, progress)
                 start = time.perf_counter()
         collector.shutdown()
         env.close()
@@ -700,6 +727,7 @@ def train_marl(
         "final": {k: last.get(k) for k in ("mean_aoi_horizon", "docked_rate")},
         "greedy": greedy,
         "imitation": run.get("imitation"),
+        "best": run.get("best"),
         "episodes": asdict(episodes),
         "policy": str(out / POLICY),
     }
