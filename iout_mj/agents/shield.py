@@ -107,6 +107,13 @@ def _keep_out(mission: Any, action: IntArray, outside: BoolArray) -> None:
     AUV ends the slot, and can end the next one, farther than `KEEP_OUT_MARGIN_M` from the
     zone (an AUV with no such pair keeps its choice)."""
     s, radius_m = mission.state, mission.cfg.scenario.dock_radius_m + KEEP_OUT_MARGIN_M
+    # two slots move an AUV at most this far: farther from the zone, every move is clear
+    reach_m = 2 * mission.cfg.scenario.slot_s * (
+        mission.cfg.motion.v_max_mps + float(np.hypot(*s.current_mps))
+    )
+    distance_m = np.linalg.norm(s.positions_m - mission.dock_m, axis=-1)
+    if not np.any(outside & (distance_m <= radius_m + reach_m)):
+        return
     ends, heading, speed = _moves(mission, s.positions_m, s.heading_sp, s.speed_sp)
     then, _, _ = _moves(mission, ends, heading, speed)  # (N, H, S, H, S, 2)
     clear_now = np.linalg.norm(ends - mission.dock_m, axis=-1) > radius_m
