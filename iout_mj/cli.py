@@ -388,7 +388,12 @@ def build_parser() -> argparse.ArgumentParser:
         "stratified-bootstrap CIs, probability of improvement (rliable)",
         **fmt,
     )
-    p.add_argument("--results", required=True, help="a folder from evaluate --out")
+    p.add_argument(
+        "--results",
+        required=True,
+        nargs="+",
+        help="folders from evaluate --out (several: policies evaluated apart, read together)",
+    )
     p.add_argument("--policy", required=True, help="the policy's name in the results")
     p.add_argument(
         "--reference",

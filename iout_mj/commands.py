@@ -415,8 +415,8 @@ def train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
 def cmd_compare(args: argparse.Namespace) -> int:
     from iout_mj.experiments import compare
 
-    results = Path(args.results)
-    rows, episodes = compare.read_rows(results), compare.read_episodes(results)
+    folders = [Path(f) for f in args.results]
+    rows, episodes = compare.read_folders(folders)
     print(
         f"compare: {args.bootstrap_reps:,} stratified-bootstrap resamples per interval (about "
         "a second per cell) ...",
@@ -429,7 +429,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         args.reference,
         reps=args.bootstrap_reps,
         seed=args.bootstrap_seed,
-        results=results,
+        results=folders[0] if len(folders) == 1 else None,
     )
     print(json.dumps(result, indent=2) if args.json else compare.format_markdown(result))
     return 0

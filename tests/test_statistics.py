@@ -223,3 +223,24 @@ def test_compare_against_the_best_planner_of_every_cell(planners, run):
     assert "P(greedy < the best planner)" in table.splitlines()[-1]
     code, _, err = run(*args, "ppo-general", "--bootstrap-reps", "200")
     assert code == 2 and "no cell holds both 'greedy' and 'ppo-general'" in err
+
+
+def test_compare_reads_policies_evaluated_apart(planners, tmp_path, run):
+    """A policy and its reference from two evaluations read as one (the same episodes)."""
+    for policy in ("greedy", "tour-scheduler"):
+        code, _, _ = run(
+            *("evaluate", "--policy", policy, "--n-auvs", "1", "--nodes", "5", "--episodes"),
+            *("2", "--backend", "kinematic", "--workers", "1", "--out", tmp_path / policy),
+        )
+        assert code == 0
+    args = ("--policy", "greedy", "--bootstrap-reps", "200", "--json")
+    apart_folders = (tmp_path / "greedy", tmp_path / "tour-scheduler")
+    code, out, _ = run("compare", "--results", *apart_folders, *args)
+    assert code == 0
+    apart = json.loads(out)["cells"]
+    code, out, _ = run("compare", "--results", planners, *args)
+    together = [c for c in json.loads(out)["cells"] if c["n_auvs"] == 1]
+    keys = ("policy_aoi_iqm", "reference_aoi_iqm", "ratio", "p_improvement", "reference")
+    assert [[c[k] for k in keys] for c in apart] == [[c[k] for k in keys] for c in together]
+    code, _, err = run("compare", "--results", tmp_path / "greedy", planners, *args)
+    assert code == 2 and "both hold 'greedy' at N=1, K=5" in err

@@ -5,8 +5,8 @@ than the reference's, docking rates and data; then the same over all cells (`sta
 rliable). The reference `best-planner` is, in every cell, the baseline with the lowest mean
 AoI(Tmax) there.
 
-Reads results.json (the cells, docking and data) and episodes.json (the runs) of a folder
-written by `iout-mj evaluate --out`.
+Reads results.json (the cells, docking and data) and episodes.json (the runs) of one or more
+folders written by `iout-mj evaluate --out`.
 """
 
 from __future__ import annotations
@@ -49,6 +49,31 @@ def read_episodes(results: Path) -> list[dict[str, Any]]:
     for i, row in enumerate(episodes):
         _positive_aoi(row, f"{path}: episode {i}")
     return episodes
+
+
+def read_folders(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The summary and episode rows of one or more evaluation folders, together (policies
+    evaluated apart: a learned policy over training seeds, a baseline on its own).
+
+    Raises:
+        ResultFileError: a file is wrong (`read_rows`), or two folders hold the same policy
+            in the same cell.
+    """
+    rows: list[dict[str, Any]] = []
+    episodes: list[dict[str, Any]] = []
+    where: dict[tuple[str, Cell], Path] = {}
+    for folder in folders:
+        for row in read_rows(folder):
+            key = (row["policy"], cell_of(row))
+            if key in where:
+                raise ResultFileError(
+                    f"{folder} and {where[key]} both hold {key[0]!r} at N={key[1][0]}, "
+                    f"K={key[1][1]}: accepted folders that hold each policy's cell once"
+                )
+            where[key] = folder
+        rows += read_rows(folder)
+        episodes += read_episodes(folder)
+    return rows, episodes
 
 
 def _positive_aoi(row: dict[str, Any], where: str) -> None:
