@@ -295,6 +295,7 @@ def test_shipped_configs_load(name):
     cfg = MarlConfig.load(ROOT / "training" / "configs" / f"{name}.yaml")
     assert cfg.algorithm == name.split("-")[0] and cfg.n_auvs == int(name[-1])
     assert cfg.node_range == (3, 20) and cfg.imitation is not None
+    assert cfg.shield == (cfg.algorithm == "mappo")  # the MAPPO recipe trains under the shield
 
 
 def test_train_marl_command(tmp_path, capsys):
