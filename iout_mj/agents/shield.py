@@ -75,9 +75,10 @@ class DockShield:
         if self._homing is None or mission.state.slot == 0:
             self._homing = np.zeros(mission.n_auvs, dtype=bool)
         self._homing |= self.planner.must_dock(mission)
-        heading, speed = self.planner.dock_approach(mission)
-        action[self._homing, 0] = heading[self._homing]
-        action[self._homing, 1] = speed[self._homing]
+        if self._homing.any():
+            heading, speed = self.planner.dock_approach(mission)
+            action[self._homing, 0] = heading[self._homing]
+            action[self._homing, 1] = speed[self._homing]
         current_mps = float(np.hypot(*mission.state.current_mps))
         self.release.dock_spare_slots = (
             self.planner.dock_spare_slots + KEEP_OUT_RELEASE_SLOTS_PER_MPS * current_mps
@@ -115,10 +116,12 @@ def _keep_out(mission: Any, action: IntArray, outside: BoolArray) -> None:
     if not np.any(outside & (distance_m <= radius_m + reach_m)):
         return
     ends, heading, speed = _moves(mission, s.positions_m, s.heading_sp, s.speed_sp)
-    then, _, _ = _moves(mission, ends, heading, speed)  # (N, H, S, H, S, 2)
-    clear_now = np.linalg.norm(ends - mission.dock_m, axis=-1) > radius_m
-    clear_then = (np.linalg.norm(then - mission.dock_m, axis=-1) > radius_m).any(axis=(-2, -1))
-    clear = clear_now & clear_then
+    end_distance_m = np.linalg.norm(ends - mission.dock_m, axis=-1)  # (N, H, S)
+    clear = end_distance_m > radius_m
+    # the next slot can lead in only from an end within one slot's reach of the zone
+    near = clear & (end_distance_m <= radius_m + reach_m / 2)
+    then, _, _ = _moves(mission, ends[near], heading[near], speed[near])  # (M, H, S, 2)
+    clear[near] = (np.linalg.norm(then - mission.dock_m, axis=-1) > radius_m).any(axis=(-2, -1))
     h_levels, v_levels = np.arange(clear.shape[1]), np.arange(clear.shape[2])
     change = (
         np.abs(h_levels[None, :, None] - action[:, 0, None, None])
