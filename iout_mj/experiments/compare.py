@@ -63,7 +63,8 @@ def read_folders(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[s
     episodes: list[dict[str, Any]] = []
     where: dict[tuple[str, Cell], Path] = {}
     for folder in folders:
-        for row in read_rows(folder):
+        folder_rows = read_rows(folder)
+        for row in folder_rows:
             key = (row["policy"], cell_of(row))
             if key in where:
                 raise ResultFileError(
@@ -71,7 +72,7 @@ def read_folders(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[s
                     f"K={key[1][1]}: accepted folders that hold each policy's cell once"
                 )
             where[key] = folder
-        rows += read_rows(folder)
+        rows += folder_rows
         episodes += read_episodes(folder)
     return rows, episodes
 
