@@ -453,7 +453,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from iout_mj.experiments import bench_warp
 
         say = lambda stage: print(f"bench: {stage} ...", file=sys.stderr)  # noqa: E731
-        warp = bench_warp.run(args.warp_sizes, say=say)
+        warp = bench_warp.run(args.warp_sizes, quick=args.quick, say=say)
         if out:
             _write_json(out / "bench-warp.json", warp)
         print(json.dumps(warp, indent=2) if args.json else bench_warp.format_table(warp))

@@ -182,8 +182,8 @@ def field_types(cls: Any) -> dict[str, Any]:
 
 def check_types(config: Any) -> None:
     """A config built in code is checked as one read from a file: every field against its
-    annotation (integers, numbers, strings, booleans, lists, sections), before any range check; lists
-    become tuples and mappings sections, as when read (`schema.build_dataclass`)."""
+    annotation (integers, numbers, strings, booleans, lists, sections), before any range check;
+    lists become tuples and mappings sections, as when read (`schema.build_dataclass`)."""
     cls: Any = type(config)
     hints = field_types(cls)
     for f in dataclasses.fields(config):

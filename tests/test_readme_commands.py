@@ -102,7 +102,7 @@ def shortened(argv: list[str]) -> list[str]:
             pytest.importorskip("mujoco_warp")
             i = _option(a, "--warp-sizes")
             a = (a[:i] + a[_values_end(a, i) :]) if i is not None else a
-            a += ["--warp-sizes", "2"]
+            a += ["--warp-sizes", "1", "--quick"]
         elif "--from-json" not in a:  # quick, and kept in benchmarks/bench.json
             a += ["--quick"] + ([] if "--out" in a else ["--out", "benchmarks"])
     return a

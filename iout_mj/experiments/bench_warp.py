@@ -48,9 +48,9 @@ def env_rate(b: int, slots: int) -> dict[str, float]:
     }
 
 
-def ppo_rate(b: int, device: str, rollouts: int = 2) -> float:
+def ppo_rate(b: int, device: str, rollouts: int = 2, n_steps: int = 8) -> float:
     """PPO steps/s on a WarpVecEnv of B scenes, SB3 on `device` ('cuda' or 'cpu')."""
-    cfg = TrainConfig(n_auvs=2, n_nodes=7, n_envs=b, n_steps=8, batch_size=b * 8)
+    cfg = TrainConfig(n_auvs=2, n_nodes=7, n_envs=b, n_steps=n_steps, batch_size=b * n_steps)
     venv = VecNormalize(WarpVecEnv(b, config=fixed_config(2, 7), seed=0), gamma=cfg.gamma)
     model = new_model(cfg, venv, device=device)
     model.learn(b * cfg.n_steps)  # warm up
@@ -62,9 +62,11 @@ def ppo_rate(b: int, device: str, rollouts: int = 2) -> float:
 
 
 def run(
-    sizes: Sequence[int] | None = None, slots: int = 2, say: Callable[[str], None] = print
+    sizes: Sequence[int] | None = None, quick: bool = False, say: Callable[[str], None] = print
 ) -> dict[str, Any]:
-    """The warp benchmark on the device Warp finds."""
+    """The warp benchmark on the device Warp finds; `quick` times one slot and one short
+    rollout (a smoke test: on Warp's CPU device every slot costs seconds)."""
+    slots, rollouts, n_steps = (1, 1, 2) if quick else (2, 2, 8)
     device = default_device()
     sizes = sizes or (GPU_SIZES if device == "cuda" else CPU_SIZES)
     torch_device = "cuda" if device == "cuda" and torch.cuda.is_available() else "cpu"
@@ -73,7 +75,7 @@ def run(
         say(f"warp env and raw steps/s, B = {b}")
         result["sizes"][str(b)] = env_rate(b, slots)
     say(f"PPO steps/s on the warp backend, B = {sizes[-1]}")
-    result["ppo_steps_per_s"] = ppo_rate(sizes[-1], torch_device)
+    result["ppo_steps_per_s"] = ppo_rate(sizes[-1], torch_device, rollouts, n_steps)
     result["ppo_batch"] = sizes[-1]
     return result
 
