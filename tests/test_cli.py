@@ -211,23 +211,14 @@ def test_evaluate_skips_cells_a_policy_cannot_serve():
     assert "skipped ppo-n1-k7 at N=1, K=3" in out.stderr
 
 
-def test_evaluate_skips_the_n_no_general_policy_is_shipped_for_and_flies_the_rest():
-    from iout_mj.agents.policies import shipped_policies
-
-    lacking = [n for n in (3, 4) if f"ppo-general-n{n}" not in shipped_policies()]
-    if not lacking:
-        pytest.skip("a general policy is shipped for every N")
-    n = str(lacking[0])
+def test_evaluate_flies_a_shipped_general_policy_for_every_n():
     out = run(
-        *("evaluate", "--policy", "ppo-general", "tour-scheduler", "--n-auvs", "1", n),
-        *("--nodes", "3", "--layout", "random", "--episodes", "1", "--backend", "kinematic"),
-        "--json",
+        *("evaluate", "--policy", "ppo-general", "--n-auvs", "1", "2", "3", "4", "--nodes", "3"),
+        *("--layout", "random", "--episodes", "1", "--backend", "kinematic", "--json"),
     )
-    cells = {(r["policy"], r["n_auvs"]) for r in json.loads(out.stdout)}
-    assert cells == {("ppo-general", 1), ("tour-scheduler", 1), ("tour-scheduler", int(n))}
-    assert f"skipped ppo-general at N={n}, K=3: unknown policy 'ppo-general-n{n}'" in out.stderr
-    alone = run("evaluate", "--policy", "ppo-general", "--n-auvs", n, "--nodes", "3", check=False)
-    assert alone.returncode != 0 and f"unknown policy 'ppo-general-n{n}'" in alone.stderr
+    rows = {r["n_auvs"]: r for r in json.loads(out.stdout)}
+    assert set(rows) == {1, 2, 3, 4} and "skipped" not in out.stderr
+    assert all(np.isfinite(r["mean_aoi_horizon"]) for r in rows.values())
 
 
 def test_evaluate_flies_mappo_as_the_shipped_team_policy_for_each_n():
@@ -239,6 +230,8 @@ def test_evaluate_flies_mappo_as_the_shipped_team_policy_for_each_n():
     assert set(rows) == {("mappo", 2), ("greedy", 1), ("greedy", 2)}
     assert np.isfinite(rows["mappo", 2]["mean_aoi_horizon"])
     assert "skipped mappo at N=1, K=5: unknown policy 'mappo-n1'" in out.stderr
+    alone = run("evaluate", "--policy", "mappo", "--n-auvs", "1", "--nodes", "5", check=False)
+    assert alone.returncode != 0 and "unknown policy 'mappo-n1'" in alone.stderr
 
 
 def readme_commands():
