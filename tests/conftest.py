@@ -61,3 +61,16 @@ def tiny_training(**changes: object) -> object:
 @pytest.fixture
 def cli() -> Callable[..., subprocess.CompletedProcess]:
     return run_cli
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Longest first: the README-commands test (minutes), then the other slow tests, then the
+    rest, each group in file order, so that the test workers (pytest-xdist, one per core) end
+    together instead of one waiting for a long test started last."""
+
+    def rank(item: pytest.Item) -> int:
+        if item.path.name == "test_readme_commands.py":
+            return 0
+        return 1 if item.get_closest_marker("slow") else 2
+
+    items.sort(key=rank)
