@@ -497,6 +497,7 @@ def _interrupted(exc: BaseException | None) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    before = os.environ.get("TQDM_DISABLE")
     if args.quiet:
         os.environ["TQDM_DISABLE"] = "1"  # every progress bar of the project is tqdm's
     try:
@@ -512,6 +513,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"iout-mj {args.command}: error: {exc}", file=sys.stderr)
             return 2
         raise
+    finally:  # a caller of main() in its own process keeps its environment
+        if before is None:
+            os.environ.pop("TQDM_DISABLE", None)
+        else:
+            os.environ["TQDM_DISABLE"] = before
 
 
 if __name__ == "__main__":

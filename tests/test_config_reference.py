@@ -61,6 +61,18 @@ def test_version_and_quiet(cli):
     assert quiet.stdout == loud.stdout  # the same table
 
 
+def test_quiet_leaves_the_callers_environment_as_it_was(monkeypatch, capsys):
+    import os
+
+    from iout_mj.cli import main
+
+    monkeypatch.delenv("TQDM_DISABLE", raising=False)
+    assert main(["--quiet", "list"]) == 0
+    assert "TQDM_DISABLE" not in os.environ  # the subprocesses a caller starts later show bars
+    monkeypatch.setenv("TQDM_DISABLE", "0")
+    assert main(["--quiet", "list"]) == 0 and os.environ["TQDM_DISABLE"] == "0"
+
+
 def test_top_level_help_names_every_command():
     out = subprocess.run(
         [sys.executable, "-m", "iout_mj.cli", "--help"], capture_output=True, text=True, check=True
