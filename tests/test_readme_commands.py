@@ -4,8 +4,9 @@ of the same kind (`shortened` says exactly what changes; `train-marl` trains smo
 A `--resume` runs after the run it resumes; a training the README shows twice into one run
 folder starts it again (--overwrite);
 a training that differs from one already run only in its seed and run folder loads its own
-config and copies that run; the
-benchmark is measured once (quick) and the later `bench` lines format that run."""
+config and copies that run; the `bench` lines format the shipped run
+(benchmarks/results-2cpu.json; `test_cli` measures `bench --quick`) and `bench --warp` runs
+quick at B = 1."""
 
 import re
 import shlex
@@ -51,7 +52,8 @@ def _values_end(argv: list[str], i: int) -> int:
 def shortened(argv: list[str]) -> list[str]:
     """The same command with CI-sized counts: the kinematic model for evaluations, one episode
     per cell and one K, 3 slots of a small video, 128 training steps of the smoke config of the
-    same kind (into the run folder the README's config would use), quick benchmarks."""
+    same kind (into the run folder the README's config would use), 200 bootstrap resamples per
+    confidence interval, benchmarks as above."""
     a = list(argv)
     command = a[0]
     i = _option(a, "--episodes")
@@ -97,14 +99,16 @@ def shortened(argv: list[str]) -> list[str]:
         n_auvs = re.search(r"-n(\d)\b", name)  # the smoke run flies the README config's N
         if n_auvs and "--n-auvs" not in a and not marl:
             a += ["--n-auvs", n_auvs.group(1)]
+    if command == "compare" and "--bootstrap-reps" not in a:
+        a += ["--bootstrap-reps", "200"]
     if command == "bench":
         if "--warp" in a:
             pytest.importorskip("mujoco_warp")
             i = _option(a, "--warp-sizes")
             a = (a[:i] + a[_values_end(a, i) :]) if i is not None else a
             a += ["--warp-sizes", "1", "--quick"]
-        elif "--from-json" not in a:  # quick, and kept in benchmarks/bench.json
-            a += ["--quick"] + ([] if "--out" in a else ["--out", "benchmarks"])
+        elif "--from-json" not in a:  # the shipped run formatted (test_cli measures --quick)
+            a += ["--from-json", "benchmarks/results-2cpu.json"]
     return a
 
 
@@ -155,9 +159,6 @@ def test_every_readme_command_runs_shortened(tmp_path, monkeypatch):
             if tuple(first) not in done:
                 assert main(first) == 0, f"iout-mj {' '.join(first)}"
                 done.add(tuple(first))
-        measured = tmp_path / "benchmarks" / "bench.json"
-        if short[0] == "bench" and "--quick" in short and measured.exists():  # measured once:
-            short = [x for x in short if x != "--quick"] + ["--from-json", str(measured)]
         if tuple(short) in done:  # the README shows some commands twice
             continue
         done.add(tuple(short))
