@@ -113,7 +113,8 @@ class TeamPolicy:
         present = torch.as_tensor(obs[:, node_present_slice(self.n_max, self.k_max)])
         return masked_logits(logits, self.nvec, present)
 
-    def __call__(self, env: Any, _obs: np.ndarray) -> np.ndarray:
-        obs = padded_observations(env.unwrapped.mission, self.n_max, self.k_max)
-        actions = torch.stack([p.argmax(-1) for p in self.logits(obs)], dim=-1)
+    def __call__(self, env: Any, obs: np.ndarray) -> np.ndarray:
+        """The joint action; `obs` is not read: each AUV's padded view comes from the mission."""
+        views = padded_observations(env.unwrapped.mission, self.n_max, self.k_max)
+        actions = torch.stack([p.argmax(-1) for p in self.logits(views)], dim=-1)
         return actions.numpy().astype(np.int64).ravel()
