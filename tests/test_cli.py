@@ -322,13 +322,14 @@ def test_ctrl_c_is_one_line_and_exit_130(monkeypatch, capsys, raise_it):
 
 @pytest.mark.slow
 def test_ctrl_c_ends_an_evaluation_and_its_workers_quietly(tmp_path):
-    argv = ["evaluate", "--policy", "greedy", "--episodes", "2000", "--backend", "kinematic"]
+    argv = ["evaluate", "--policy", "greedy", "--episodes", "20000", "--backend", "kinematic"]
     proc = subprocess.Popen(
         [sys.executable, "-m", "iout_mj.cli", *argv, "--workers", "2", "--out", tmp_path],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        env={k: v for k, v in os.environ.items() if k != "TQDM_DISABLE"},  # the bar is the cue
     )
     # stderr read as it comes, character by character (the progress bar ends its updates with
     # a carriage return, not a newline): the bar says when the episodes run
@@ -340,10 +341,12 @@ def test_ctrl_c_ends_an_evaluation_and_its_workers_quietly(tmp_path):
     deadline = time.monotonic() + 120
     while not re.search(r"\| [1-9]\d*/\d+", "".join(err_lines)) and time.monotonic() < deadline:
         time.sleep(0.1)  # until the workers have finished an episode (the pool is up)
+    running = proc.poll() is None
     os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
     proc.wait(timeout=60)
     reader.join(timeout=60)
     err = "".join(err_lines)
+    assert running, f"the evaluation ended before the interrupt: {err[-500:]}"
     assert proc.returncode == 130, err
     assert "iout-mj evaluate: interrupted" in err and "Traceback" not in err
 

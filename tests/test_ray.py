@@ -2,6 +2,7 @@
 trials are the project's trainer, on a local Ray instance bound to loopback."""
 
 import json
+import os
 import socket
 import time
 
@@ -31,6 +32,12 @@ def test_evaluation_on_ray_gives_the_rows_of_the_local_pool(local_ray):
     assert remote == local
     key = lambda e: (e["policy"], e["n_auvs"], e["seed"])  # noqa: E731
     assert json.dumps(sorted(remote_eps, key=key)) == json.dumps(sorted(local_eps, key=key))
+
+
+def test_the_local_instances_workers_run_at_the_callers_priority(local_ray):
+    """Not Ray's default nice 15, at which a busy machine starves the tasks."""
+    niceness = ray.remote(num_cpus=1)(lambda: os.nice(0))
+    assert ray.get(niceness.remote()) == os.nice(0)
 
 
 def test_a_two_trial_sweep_writes_results_and_resumes(local_ray, tmp_path):

@@ -1,5 +1,6 @@
-"""Every `iout-mj` command of the README runs, in the order the README gives them, shortened
-for CI: one episode per cell on the kinematic model, a few slots of video, a smoke training
+"""Every `iout-mj` command of the README runs, in the order the README gives them within
+groups of commands that share a run or output folder (the groups are independent tests),
+shortened for CI: one episode per cell on the kinematic model, a few slots of video, a smoke training
 of the same kind (`shortened` says exactly what changes; `train-marl` trains smoke-mappo.yaml).
 A `--resume` runs after the run it resumes; a training the README shows twice into one run
 folder starts it again (--overwrite);
@@ -139,10 +140,74 @@ def test_shortening_keeps_the_command_and_its_options():
     ]
 
 
-def test_every_readme_command_runs_shortened(tmp_path, monkeypatch):
+SHARED_FOLDERS = ("renders", "runs")
+"""Output folders many commands write into: only a command naming the folder itself joins them."""
+
+
+def _resource(token: str) -> str:
+    """The run or output folder a token names: any seed of a run, and its `best/`, `last/`,
+    `policy/` or `+dock`-style variants, count as the run."""
+    t = re.sub(r"\+.*$", "", token).rstrip("/")
+    t = re.sub(r"/(best|last|policy)$", "", t)
+    return re.sub(r"-seed\d+", "-seed*", t)
+
+
+def runnable_commands() -> list[list[str]]:
+    """The README's commands that are not patterns, as written."""
+    return [a for a in readme_commands() if not any(p in a for p in PLACEHOLDERS)]
+
+
+def readme_groups() -> list[list[int]]:
+    """The runnable README commands (indices into `runnable_commands()`) in independent
+    groups, README order inside each: commands that name one run or output folder share a
+    group, and so do all that start a Ray instance; the groups run as separate tests, in
+    parallel under pytest-xdist."""
+    commands = [shortened(a) for a in runnable_commands()]
+    outs = {_resource(c[_option(c, "--out") + 1]) for c in commands if "--out" in c}
+    groups: list[tuple[set[str], list[int]]] = []
+    for i, command in enumerate(commands):
+        tokens = {_resource(t) for t in command if not t.startswith("--")}
+        uses = {
+            o
+            for o in outs
+            for t in tokens
+            if t == o or (o not in SHARED_FOLDERS and t.startswith(o + "/"))
+        }
+        if "--ray" in command or command[0] == "sweep":
+            uses.add("ray")
+        joined = [g for g in groups if g[0] & uses]
+        merged = sorted(j for g in joined for j in g[1])
+        for g in joined:
+            groups.remove(g)
+            uses |= g[0]
+        groups.append((uses, [*merged, i]))
+    return [g[1] for g in groups]
+
+
+def test_readme_groups_keep_a_run_with_the_commands_that_read_it():
+    groups = readme_groups()
+    commands = [shortened(a) for a in runnable_commands()]
+    assert sorted(i for g in groups for i in g) == list(range(len(commands)))
+    where = {tuple(commands[i]): n for n, g in enumerate(groups) for i in g}
+    seeds = "runs/seeds/ppo-n2-k7-seed"
+    trainings = [g for c, g in where.items() if c[0] == "train" and seeds in " ".join(c)]
+    evaluation = [g for c, g in where.items() if c[0] == "evaluate" and seeds in " ".join(c)]
+    assert len(set(trainings + evaluation)) == 1 and len(trainings) == 5  # every seed it reads
+    ray = {g for c, g in where.items() if "--ray" in c or c[0] == "sweep"}
+    assert len(ray) == 1  # one Ray instance at a time
+
+
+COMMANDS = runnable_commands()
+GROUPS = readme_groups()
+
+
+@pytest.mark.parametrize(
+    "group", GROUPS, ids=[f"{n:02d}-{COMMANDS[g[0]][0]}-{len(g)}" for n, g in enumerate(GROUPS)]
+)
+def test_every_readme_command_runs_shortened(group: list[int], tmp_path, monkeypatch):
     """In a scratch folder holding the project's training/ and benchmarks/ files, so that the
     README's relative paths work and nothing it writes touches the checkout; in this process
-    (`cli.main`, as the console script calls it), so the imports are paid once."""
+    (`cli.main`, as the console script calls it), so the imports are paid once per worker."""
     from iout_mj.cli import main
 
     monkeypatch.chdir(tmp_path)
@@ -150,9 +215,7 @@ def test_every_readme_command_runs_shortened(tmp_path, monkeypatch):
     shutil.copytree(ROOT / "benchmarks", tmp_path / "benchmarks")
     done: set[tuple[str, ...]] = set()
     trained: dict[tuple[str, ...], Path] = {}  # a smoke training -> its run folder
-    for argv in readme_commands():
-        if any(p in argv for p in PLACEHOLDERS):
-            continue
+    for argv in (COMMANDS[i] for i in group):
         short = shortened(argv)
         if "--resume" in short:  # the run it resumes comes first (once)
             first = [x for x in short if x != "--resume"]

@@ -92,6 +92,10 @@ def connect(address: str | None, timeout_s: float | None = None) -> None:
             include_dashboard=False,
             log_to_driver=False,
             _node_ip_address="127.0.0.1",
+            # Ray starts its workers at nice 15: beside any other busy process (a training, a
+            # second test worker) they then get a few % of a core, and importing torch in
+            # each took 30 s instead of 2 here. The tasks are the job: they run at our priority.
+            _system_config={"worker_niceness": 0},
         )
         return
     if address != "auto":
