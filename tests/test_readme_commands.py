@@ -1,11 +1,10 @@
-"""Every `iout-mj` command of the README runs, in the order the README gives them within
-groups of commands that share a run or output folder (the groups are independent tests),
-shortened for CI: one episode per cell on the kinematic model, a few slots of video, a smoke training
-of the same kind (`shortened` says exactly what changes; `train-marl` trains smoke-mappo.yaml).
-A `--resume` runs after the run it resumes; a training the README shows twice into one run
-folder starts it again (--overwrite);
-a training that differs from one already run only in its seed and run folder loads its own
-config and copies that run; the `bench` lines format the shipped run
+"""Every `iout-mj` command of the README runs, in the order the README gives them within groups of
+commands that share a run or output folder (the groups are independent tests), shortened for CI:
+one episode per cell on the kinematic model, a few slots of video, a smoke training of the same
+kind (`shortened` says exactly what changes; `train-marl` trains smoke-mappo.yaml). A `--resume`
+runs after the run it resumes; a training the README shows twice into one run folder starts it
+again (--overwrite); a training that differs from one already run only in its seed and run
+folder loads its own config and copies that run; the `bench` lines format the shipped run
 (benchmarks/results-2cpu.json; `test_cli` measures `bench --quick`) and `bench --warp` runs
 quick at B = 1."""
 

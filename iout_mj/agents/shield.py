@@ -109,8 +109,10 @@ def _keep_out(mission: Any, action: IntArray, outside: BoolArray) -> None:
     zone (an AUV with no such pair keeps its choice)."""
     s, radius_m = mission.state, mission.cfg.scenario.dock_radius_m + KEEP_OUT_MARGIN_M
     # two slots move an AUV at most this far: farther from the zone, every move is clear
-    reach_m = 2 * mission.cfg.scenario.slot_s * (
-        mission.cfg.motion.v_max_mps + float(np.hypot(*s.current_mps))
+    reach_m = (
+        2
+        * mission.cfg.scenario.slot_s
+        * (mission.cfg.motion.v_max_mps + float(np.hypot(*s.current_mps)))
     )
     distance_m = np.linalg.norm(s.positions_m - mission.dock_m, axis=-1)
     if not np.any(outside & (distance_m <= radius_m + reach_m)):
