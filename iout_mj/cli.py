@@ -443,7 +443,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func="cmd_bench")
 
     p = sub.add_parser("figures", help="the paper's figures from saved results", **fmt)
-    p.add_argument("--results", help="folder written by evaluate --out")
+    p.add_argument(
+        "--results",
+        nargs="+",
+        help="folders written by evaluate --out (several: read together, each policy's cell once)",
+    )
+    p.add_argument(
+        "--policies", nargs="+", metavar="POLICY", help="draw only these (default: every one)"
+    )
+    p.add_argument(
+        "--label",
+        nargs="+",
+        default=[],
+        metavar="POLICY=NAME",
+        help="a policy's name in the legend (one NAME may gather one policy per N)",
+    )
     p.add_argument("--runs", nargs="+", help="training run folders (training curves)")
     p.add_argument("--out", help="folder for the PNGs (default: the results folder)")
     p.set_defaults(func="cmd_figures")

@@ -316,11 +316,20 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
     if not args.results and not args.runs:
         raise UsageError("figures: give --results DIR and/or --runs RUN [RUN ...]")
-    out = writable_dir(Path(args.out or args.results or "renders"))
+    labels = {}
+    for item in args.label:
+        policy, sep, name = item.rpartition("=")
+        if not sep or not policy or not name:
+            raise UsageError(f"figures --label {item!r}: accepted POLICY=NAME")
+        labels[policy] = name
+    if (labels or args.policies) and not args.results:
+        raise UsageError("figures: --label and --policies need --results DIR [DIR ...]")
+    out = writable_dir(Path(args.out or (args.results or ["renders"])[0]))
     with output_lock(out, "figures"):
         if args.results:
             skipped: list[str] = []
-            for path in figures.figures_from_results(Path(args.results), out, skipped):
+            folders = [Path(r) for r in args.results]
+            for path in figures.figures_from_results(folders, out, skipped, labels, args.policies):
                 print(path)
             for note in skipped:
                 print(note, file=sys.stderr)

@@ -161,6 +161,8 @@ def test_flags_apply_only_when_given_and_conflicts_are_errors(tmp_path):
         (("mission", "--seed", "-1"), "accepted an integer >= 0"),
         (("evaluate", "--episodes", "0"), "accepted an integer >= 1"),
         (("mission", "--width", "8"), "accepted an integer from 16 to 1920"),
+        (("figures", "--results", "x", "--label", "ppo"), "--label 'ppo': accepted POLICY=NAME"),
+        (("figures", "--runs", "x", "--policies", "ppo"), "--policies need --results DIR"),
     ],
 )
 def test_bad_arguments_say_what_is_accepted(args, match):

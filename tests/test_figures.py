@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from iout_mj.errors import UsageError
 from iout_mj.experiments import figures
 from iout_mj.mission.stats import SUMMARY_KEYS
 
@@ -93,3 +94,21 @@ def test_confidence_intervals_use_student_t_and_stay_in_range():
     assert low == pytest.approx(half) and high == pytest.approx(0.02)
     assert figures.ci95(5.0, 1.0, 1, 0.0, math.inf) == (0.0, 0.0)  # one episode: no interval
     assert figures.ci95(5.0, 1.0, 101, 0.0, math.inf)[0] == pytest.approx(0.1984, abs=1e-3)
+
+
+def test_folders_read_together_gather_one_policy_per_n_under_one_label(tmp_path):
+    """The learned policy of each N evaluated apart (its own folder) is one series."""
+    one = results(tmp_path / "n1", [row(p, 1, k) for p in ("greedy", "a/best") for k in (3, 11)])
+    two = [row(p, 2, k, training_seeds=5) for p in ("greedy", "b/best") for k in (3, 11)]
+    folders = [one, results(tmp_path / "n2", two, {"b/best, N=2": trace(2)})]
+    labels = {"a/best": "ppo-general", "b/best": "ppo-general"}
+    rows, traces = figures.read_results(folders, labels, ["a/best", "b/best"])
+    assert {(r["policy"], r["n_auvs"]) for r in rows} == {("ppo-general", 1), ("ppo-general", 2)}
+    assert list(traces) == ["ppo-general, N=2"]
+    assert figures.condition(rows).endswith("3 episodes per cell (5 training seeds)")
+    with pytest.raises(UsageError, match=r"no policy 'c/best' in the results: accepted \["):
+        figures.read_results(folders, {"c/best": "x"}, None)
+    with pytest.raises(UsageError, match="'greedy' at N=1, K=3 twice"):
+        figures.read_results([one, one], {}, None)
+    with pytest.raises(UsageError, match="'same' at N=1, K=3 twice"):  # a label that merges a cell
+        figures.read_results([one], {"greedy": "same", "a/best": "same"}, None)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ from matplotlib.ticker import MaxNLocator
 
 from iout_mj import palette
 from iout_mj.config import PAPER_CHANNEL
-from iout_mj.errors import ResultFileError
+from iout_mj.errors import ResultFileError, UsageError
 from iout_mj.experiments.result_files import (
     array,
     integer,
@@ -133,29 +134,32 @@ def speed_heading_figure(
     plt.close(fig)
 
 
-def figures_from_results(results: Path, out: Path, skipped: list[str] | None = None) -> list[Path]:
-    """Every figure a folder written by `iout-mj evaluate --out` allows; each one it cannot
-    draw is said in `skipped`, with the reason.
+def figures_from_results(
+    results: Path | Sequence[Path],
+    out: Path,
+    skipped: list[str] | None = None,
+    labels: Mapping[str, str] | None = None,
+    policies: Sequence[str] | None = None,
+) -> list[Path]:
+    """Every figure one or more folders written by `iout-mj evaluate --out` allow (read
+    together: one policy per N evaluated apart, `read_results`); each one it cannot draw is
+    said in `skipped`, with the reason.
 
     Raises:
         ResultFileError: results.json or traces.json is missing a key, holds a non-finite
             number or is not JSON (the message names the file and the entry).
+        UsageError: `labels` or `policies` names a policy the results lack, or two folders
+            hold the same (policy, N, K).
     """
-    hint = f"run `iout-mj evaluate --out {results}` first"
-    rows = read_rows(results / "results.json", ("policy",), MEASURES, hint)
-    for i, row in enumerate(rows):
-        integer(row, "episodes", f"{results / 'results.json'}: row {i}", 1)
-    traces_path = results / "traces.json"
-    traces = read_traces(traces_path) if traces_path.exists() else {}
+    folders = [results] if isinstance(results, Path) else list(results)
+    rows, traces = read_results(folders, labels or {}, policies)
+    traces_path = folders[0] / "traces.json" if len(folders) == 1 else "traces.json"
     notes = skipped if skipped is not None else []
     paths = results_figures(rows, out)
     cond = condition(rows)
     if not traces:
-        why = (
-            f"{traces_path} is missing"
-            if not traces_path.exists()
-            else f"{traces_path} holds no trajectory"
-        )
+        missing = not any((f / "traces.json").exists() for f in folders)
+        why = f"{traces_path} is missing" if missing else f"{traces_path} holds no trajectory"
         notes.append(
             f"skipped Fig. 3 (trajectories) and Fig. 4 (speed and heading): {why}; evaluate "
             "keeps the first episode of each K = 7 cell, or of a config's own nodes"
@@ -173,6 +177,47 @@ def figures_from_results(results: Path, out: Path, skipped: list[str] | None = N
             f"{traces_path} (evaluate with --n-auvs 1)"
         )
     return paths
+
+
+def read_results(
+    folders: Sequence[Path], labels: Mapping[str, str], policies: Sequence[str] | None
+) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """The rows and trajectories of evaluation folders, together: only `policies` (default
+    all), each renamed by `labels` (policy -> legend name; one name may gather the policies
+    of several N, such as the learned policy of each N evaluated apart)."""
+    rows: list[dict[str, Any]] = []
+    traces: dict[str, dict[str, Any]] = {}
+    for folder in folders:
+        hint = f"run `iout-mj evaluate --out {folder}` first"
+        folder_rows = read_rows(folder / "results.json", ("policy",), MEASURES, hint)
+        for i, row in enumerate(folder_rows):
+            integer(row, "episodes", f"{folder / 'results.json'}: row {i}", 1)
+        rows += folder_rows
+        path = folder / "traces.json"
+        traces |= read_traces(path) if path.exists() else {}
+    names = sorted({r["policy"] for r in rows})
+    for name in [*labels, *(policies or [])]:
+        if name not in names:
+            raise UsageError(f"figures: no policy {name!r} in the results: accepted {names}")
+    keep = set(policies or names)
+    rows = [
+        r | {"policy": labels.get(r["policy"], r["policy"])} for r in rows if r["policy"] in keep
+    ]
+    seen: set[tuple[str, int, int]] = set()
+    for r in rows:
+        key = (r["policy"], r["n_auvs"], r["n_nodes"])
+        if key in seen:
+            raise UsageError(
+                f"figures: the results hold {key[0]!r} at N={key[1]}, K={key[2]} twice: "
+                "accepted folders (and --label names) that hold each policy's cell once"
+            )
+        seen.add(key)
+    kept_traces = {}
+    for label, trace in traces.items():
+        policy, _, rest = label.rpartition(", ")
+        if policy in keep:
+            kept_traces[f"{labels.get(policy, policy)}, {rest}"] = trace
+    return rows, kept_traces
 
 
 def trajectories_figure(traces: dict[str, dict[str, Any]], out: Path, cond: str) -> Path:
@@ -363,7 +408,8 @@ def condition(rows: list[dict[str, Any]]) -> str:
     parts.append(" / ".join(layouts.get(x, x) for x in _values(rows, "layout")))
     episodes = _values(rows, "episodes")
     span = str(episodes[0]) if len(episodes) == 1 else f"{episodes[0]}-{episodes[-1]}"
-    parts.append(f"{span} episodes per cell")
+    seeds = max(_values(rows, "training_seeds") or [0])
+    parts.append(f"{span} episodes per cell" + (f" ({seeds} training seeds)" if seeds > 1 else ""))
     channel = channel_text(rows)
     return ", ".join(parts) + (f";\n{channel}" if channel else "")
 
