@@ -7,7 +7,7 @@ import pytest
 
 from iout_mj.agents.policies import load_policy, read_trained, split_search
 from iout_mj.agents.rollout import run_episode
-from iout_mj.agents.search import UNDOCKED_PENALTY, RolloutSearch, _copy_state
+from iout_mj.agents.search import LATE_PENALTY, UNDOCKED_PENALTY, RolloutSearch, _copy_state
 from iout_mj.envs.batch import MissionBatch
 from iout_mj.errors import PolicyError
 
@@ -42,6 +42,24 @@ def test_a_copied_mission_flown_by_the_policy_ends_as_the_env_does():
     for e in range(2):
         copied = batch.mission.metrics(e)
         assert {k: copied[k] for k in keys} == {k: info["metrics"][k] for k in keys}
+
+
+def test_an_auv_still_undocked_at_the_deadline_costs_the_late_penalty():
+    """MuJoCo's margin: a rollout with AUVs out of the dock `deadline` slots in pays for each;
+    a deadline the rollout never reaches (the kinematic backend's: the horizon) costs nothing."""
+    env = _env(n_auvs=2, n_nodes=5)
+    base = read_trained("ppo-general", env)
+    env.reset(seed=0)
+    search = RolloutSearch(base, candidates=4, seed=0)
+    horizon = env.unwrapped.env_spec.config.scenario.horizon_slots
+    first = search._candidate_actions(env.unwrapped.mission.observe_tokens(search.k_max))
+    scores = {}
+    for deadline in (horizon, horizon + 1, 1):  # nobody docks within one slot of the start
+        batch = search._batch_for(env, len(first))
+        _copy_state(env.unwrapped.mission, batch)
+        scores[deadline] = search._scores(batch, first, deadline)
+    np.testing.assert_array_equal(scores[horizon], scores[horizon + 1])
+    np.testing.assert_allclose(scores[1] - scores[horizon], 2 * LATE_PENALTY)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
