@@ -1,9 +1,15 @@
 """Shared fixtures: configs, RNGs, scenarios and the command line."""
 
+import os
 import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
+
+# One torch thread per process: pytest-xdist runs a worker per core, and a second torch thread
+# per worker (torch's default is one per core) oversubscribes the cores and slows PPO many times
+# over. Set before torch is imported; the commands the tests start inherit it.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
 import pytest

@@ -115,14 +115,16 @@ class ConstantVecEnv(BatchedVecEnv):
 
 
 def general_recipe(quick: bool = False) -> TrainConfig:
-    """The general recipe's training config (`quick`: rollouts of 16 steps, for tests)."""
+    """The general recipe's training config (`quick`: rollouts of 16 steps and one torch
+    thread, for tests run beside others: two threads per process on a busy 2-core machine made
+    PPO about 15x slower)."""
     if not GENERAL_RECIPE.is_file():
         raise UsageError(
             f"the general recipe {GENERAL_RECIPE.name} is not here: the token PPO benchmark "
             "runs from a source checkout (training/configs beside the package)"
         )
     cfg = TrainConfig.load(GENERAL_RECIPE)
-    return dataclasses.replace(cfg, n_steps=16, batch_size=144) if quick else cfg
+    return dataclasses.replace(cfg, n_steps=16, batch_size=144, torch_threads=1) if quick else cfg
 
 
 def token_ppo_fps(backend: str | None, cfg: TrainConfig, rollouts: int = 2) -> float:
