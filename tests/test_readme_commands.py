@@ -51,9 +51,10 @@ def _values_end(argv: list[str], i: int) -> int:
 
 def shortened(argv: list[str]) -> list[str]:
     """The same command with CI-sized counts: the kinematic model for evaluations, one episode
-    per cell and one K, 3 slots of a small video, 128 training steps of the smoke config of the
-    same kind (into the run folder the README's config would use), 200 bootstrap resamples per
-    confidence interval, benchmarks as above."""
+    per cell and one K, in this process (tests of `evaluate` cover its worker pool), 3 slots of
+    a small video, 128 training steps of the smoke config of the same kind (into the run folder
+    the README's config would use), 200 bootstrap resamples per confidence interval, benchmarks
+    as above."""
     a = list(argv)
     command = a[0]
     i = _option(a, "--episodes")
@@ -71,6 +72,8 @@ def shortened(argv: list[str]) -> list[str]:
             if "--episodes" not in a
             else ["--backend", "kinematic"]
         )
+        if "--workers" not in a and "--ray" not in a:
+            a += ["--workers", "1"]  # in this process: a pool's start costs more than the episodes
     if command in ("mission", "render"):
         i = _option(a, "--slots")
         a = a[:i] + a[i + 2 :] if i is not None else a
@@ -124,7 +127,8 @@ def test_shortening_keeps_the_command_and_its_options():
         "evaluate --policy greedy --n-auvs 1 2 --nodes 3 5 7 --episodes 20 --backend mujoco --out r"
     )
     assert shortened(argv) == shlex.split(
-        "evaluate --policy greedy --n-auvs 1 2 --nodes 3 --episodes 1 --out r --backend kinematic"
+        "evaluate --policy greedy --n-auvs 1 2 --nodes 3 --episodes 1 --out r"
+        " --backend kinematic --workers 1"
     )
     marl = shortened(shlex.split("train-marl training/configs/mappo-n3.yaml"))
     assert marl == shlex.split(
@@ -174,6 +178,8 @@ def readme_groups() -> list[list[int]]:
         }
         if "--ray" in command or command[0] == "sweep":
             uses.add("ray")
+        if command[0] == "bench":  # the README's `bench --warp` lines shorten to one command
+            uses.add("bench")
         joined = [g for g in groups if g[0] & uses]
         merged = sorted(j for g in joined for j in g[1])
         for g in joined:
