@@ -52,8 +52,7 @@ def test_an_auv_still_undocked_at_the_deadline_costs_the_late_penalty():
     env.reset(seed=0)
     search = RolloutSearch(base, candidates=4, seed=0)
     horizon = env.unwrapped.env_spec.config.scenario.horizon_slots
-    probs = search._probabilities(env.unwrapped.mission.observe_tokens(search.k_max))
-    first = search._candidates(probs, search.candidates)
+    first = search._candidate_actions(env.unwrapped.mission.observe_tokens(search.k_max))
     scores = {}
     for deadline in (horizon, horizon + 1, 1):  # nobody docks within one slot of the start
         batch = search._batch_for(env, len(first))
@@ -63,14 +62,13 @@ def test_an_auv_still_undocked_at_the_deadline_costs_the_late_penalty():
     np.testing.assert_allclose(scores[1] - scores[horizon], 2 * LATE_PENALTY)
 
 
-@pytest.mark.parametrize("agentwise", [False, True])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_the_search_never_ends_worse_than_its_policy_on_the_exact_model(seed, agentwise):
+def test_the_search_never_ends_worse_than_its_policy_on_the_exact_model(seed):
     env = _env(n_auvs=2, n_nodes=5)
     base = read_trained("ppo-general", env)
     plain = run_episode(env, base, seed=seed)
-    search = RolloutSearch(base, candidates=4, seed=seed, agentwise=agentwise)
-    assert _score(run_episode(env, search, seed=seed)) <= _score(plain) + 1e-9
+    searched = run_episode(env, RolloutSearch(base, candidates=4, seed=seed), seed=seed)
+    assert _score(searched) <= _score(plain) + 1e-9
 
 
 def test_one_candidate_is_the_policy_itself():
@@ -98,32 +96,6 @@ def test_candidates_are_distinct_and_start_with_the_policy_action():
     env.reset(seed=0)
     search = RolloutSearch(base, candidates=8, seed=0)
     tokens = env.unwrapped.mission.observe_tokens(search.k_max)
-    actions = search._candidates(search._probabilities(tokens), search.candidates)
+    actions = search._candidate_actions(tokens)
     assert len({tuple(a) for a in actions}) == len(actions) > 1
     np.testing.assert_array_equal(actions[0], base.act(tokens[None])[0])
-
-
-def test_agentwise_search_tries_one_auv_at_a_time():
-    """Each batch of candidates changes one AUV's actions from the choice so far (the first
-    row), AUV by AUV, and the next AUV starts from the best row of the last."""
-    env = _env(n_auvs=2, n_nodes=7)
-    base = read_trained("ppo-general", env)
-    env.reset(seed=0)
-    search = RolloutSearch(base, candidates=8, seed=0, agentwise=True)
-    tried = []
-    best = search._best
-
-    def spy(e, actions, deadline):
-        tried.append(actions.copy())
-        return best(e, actions, deadline)
-
-    search._best = spy
-    obs = env.unwrapped.mission.observe_tokens(search.k_max)
-    chosen = search(env, obs)
-    assert len(tried) == 2 and all(len(a) <= 4 for a in tried) and len(tried[0]) > 1
-    for auv, actions in enumerate(tried):
-        changed = np.flatnonzero((actions != actions[0]).any(axis=0))
-        assert set(changed) <= set(range(4 * auv, 4 * auv + 4))
-        assert len({tuple(a) for a in actions}) == len(actions)
-    np.testing.assert_array_equal(tried[0][0], base.act(obs[None])[0])
-    assert any((tried[1] == chosen).all(axis=1))

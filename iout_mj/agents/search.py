@@ -21,7 +21,6 @@ import torch
 
 from iout_mj.agents.policies import MAX_CANDIDATES
 from iout_mj.agents.policy_format import LoadedPolicy
-from iout_mj.agents.team_policy import ACTION_DIMS
 from iout_mj.agents.token_policy import PaddedMultiCategorical
 from iout_mj.envs.batch import MissionBatch, live_arrays
 from iout_mj.errors import require_integer, require_seed
@@ -46,19 +45,12 @@ class RolloutSearch:
         candidates: joint actions tried per slot (the base action and candidates - 1 samples),
             an integer from 1 to `MAX_CANDIDATES`.
         seed: seeds the sampling of candidates (`reset(seed)` reseeds it per episode).
-        agentwise: one AUV at a time (Bertsekas's multiagent rollout, ch. 5 of the book above):
-            AUV i's own actions are tried, the AUVs before it keeping their chosen actions and
-            those after it the policy's, candidates // N per AUV; as many rollouts per slot as
-            the joint search, still never worse than the base policy on the exact model.
     """
 
-    def __init__(
-        self, base: LoadedPolicy, candidates: int = 16, seed: int = 0, agentwise: bool = False
-    ) -> None:
+    def __init__(self, base: LoadedPolicy, candidates: int = 16, seed: int = 0) -> None:
         if not base.general:
             raise ValueError("rollout search needs a general (token) policy: accepted ppo-general")
         self.candidates = require_integer(candidates, "candidates", 1, MAX_CANDIDATES)
-        self.agentwise = bool(agentwise)
         self.base = base
         self.k_max = int(base.manifest["k_max"])
         self.rng = np.random.default_rng(require_seed(seed))
@@ -70,48 +62,32 @@ class RolloutSearch:
 
     def __call__(self, env: Any, obs: np.ndarray) -> np.ndarray:
         mission = env.unwrapped.mission
-        probs = self._probabilities(mission.observe_tokens(self.k_max))
-        spec = env.unwrapped.env_spec
-        deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
-        if not self.agentwise or mission.n_auvs == 1:
-            return self._best(env, self._candidates(probs, self.candidates), deadline)
-        chosen = probs.argmax(axis=1)
-        per_auv = max(1, self.candidates // mission.n_auvs)
-        for auv in range(mission.n_auvs):
-            own = slice(auv * ACTION_DIMS, (auv + 1) * ACTION_DIMS)
-            options = self._candidates(probs[own], per_auv)  # this AUV's, its base first
-            actions = np.repeat(chosen[None], len(options), axis=0)
-            actions[:, own] = options
-            chosen = self._best(env, actions, deadline)
-        return chosen
-
-    def _best(self, env: Any, actions: np.ndarray, deadline: int) -> np.ndarray:
-        """The candidate (a row of `actions`, the first on a tie) whose rollout ends best."""
+        tokens = mission.observe_tokens(self.k_max)
+        actions = self._candidate_actions(tokens)
         if len(actions) == 1:
             return actions[0]
         batch = self._batch_for(env, len(actions))
-        _copy_state(env.unwrapped.mission, batch)
+        _copy_state(mission, batch)
+        spec = env.unwrapped.env_spec
+        deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
         return actions[int(np.argmin(self._scores(batch, actions, deadline)))]
 
-    def _probabilities(self, tokens: np.ndarray) -> np.ndarray:
-        """(dims, max size): the base policy's probability of each choice per action entry."""
+    def _candidate_actions(self, tokens: np.ndarray) -> np.ndarray:
+        """(C, dims) distinct joint actions: the deterministic one first, then samples."""
         self.base.check_observation(tokens[None])
         normalized = torch.as_tensor(self.base.normalizer(tokens[None]))
         with torch.no_grad():
             distribution = self.base.policy.get_distribution(normalized)
         assert isinstance(distribution, PaddedMultiCategorical)  # a token policy's
-        return distribution.log_probs[0].exp().numpy().astype(float)
-
-    def _candidates(self, probs: np.ndarray, count: int) -> np.ndarray:
-        """Up to `count` distinct rows of choices, one per row of `probs`: the most likely first,
-        then samples."""
+        log_probs = distribution.log_probs[0]  # (dims, max size)
+        probs = log_probs.exp().numpy().astype(float)
         best = probs.argmax(axis=1)
         found = {tuple(best)}
         out = [best]
-        cumulative = probs.cumsum(axis=1)
         tries = 0
-        while len(out) < count and tries < 4 * count:
+        while len(out) < self.candidates and tries < 4 * self.candidates:
             tries += 1
+            cumulative = probs.cumsum(axis=1)
             pick = (cumulative < self.rng.random((len(probs), 1)) * cumulative[:, -1:]).sum(1)
             key = tuple(pick)
             if key not in found:
