@@ -35,9 +35,6 @@ DOCK_MARGIN_SLOTS = {"kinematic": 0, "mujoco": 2, "warp": 2}
 flown env. The rollouts' kinematic model is exact on the kinematic backend; on MuJoCo an AUV
 answers its servos with lag, and a search without a margin docks at the last slot (55 of 55 in
 most N = 3, 4 episodes) and misses it in 10 to 30 % of them."""
-CURRENT_MARGIN_SLOTS_PER_MPS = 2.0
-"""Slots added to a non-zero margin per m/s of the mission's current (rounded): the physics
-lags its servos more against a strong current."""
 
 
 class RolloutSearch:
@@ -72,11 +69,7 @@ class RolloutSearch:
         batch = self._batch_for(env, len(actions))
         _copy_state(mission, batch)
         spec = env.unwrapped.env_spec
-        margin = DOCK_MARGIN_SLOTS[spec.backend]
-        if margin:
-            current_mps = float(np.linalg.norm(np.reshape(mission.state.current_mps, -1)[:2]))
-            margin += round(CURRENT_MARGIN_SLOTS_PER_MPS * current_mps)
-        deadline = spec.config.scenario.horizon_slots - margin
+        deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
         return actions[int(np.argmin(self._scores(batch, actions, deadline)))]
 
     def _candidate_actions(self, tokens: np.ndarray) -> np.ndarray:
