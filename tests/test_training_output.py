@@ -8,6 +8,7 @@ import json
 import os
 import re
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
@@ -223,3 +224,15 @@ def test_the_imitation_shows_its_progress(tmp_path, capsys):
     assert out.index("imitation round 1/1") < out.index("eval ")
     imitation = texts(tmp_path / "run")["run/imitation"]
     assert imitation[0][0] == 0 and "imitation round 1/1" in imitation[0][1]
+
+
+def test_a_restarted_log_sorts_after_the_event_files_already_there(tmp_path):
+    """TensorBoard reads event files in name order: a (re)started run's file must come after
+    one written this very second by another host or process whose name sorts later."""
+    from iout_mj.training.logs import run_logger
+
+    earlier = tmp_path / f"events.out.tfevents.{int(time.time()):010d}.zzzz.99999.9"
+    earlier.write_bytes(b"")
+    run_logger(tmp_path, 5).close()
+    names = sorted(f.name for f in tmp_path.glob("events.out.tfevents.*"))
+    assert len(names) == 2 and names[0] == earlier.name

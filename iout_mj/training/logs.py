@@ -4,6 +4,8 @@ hyperparameters, phase markers, and one step axis across `--resume`)."""
 
 from __future__ import annotations
 
+import re
+import time
 from pathlib import Path
 from typing import Any
 
@@ -75,12 +77,25 @@ def run_logger(folder: Path, start_step: int) -> Logger:
     T, which is the same as the uninterrupted run's. The trainer logs an evaluation before it
     saves the checkpoint, so a kill between the two leaves nothing missing.
     """
+    _wait_for_a_later_second(folder)
     output = TensorBoardOutputFormat(str(folder))
     marker = Event(step=start_step, session_log=SessionLog(status=SessionLog.START))
     writer = output.writer.file_writer
     assert writer is not None  # open until the logger closes
     writer.add_event(marker)
     return Logger(str(folder), [output])
+
+
+def _wait_for_a_later_second(folder: Path) -> None:
+    """Until the clock's second is none of the event files' in `folder`. TensorBoard reads a
+    folder's event files in name order, and a name is "events.out.tfevents.<second>.<host>.
+    <pid>.<counter>": within one second the pid and the counter, compared as text, may put a
+    resumed run's file before the crashed run's, whose restart marker then hides the resumed
+    run's steps (seen in the tests, where both run in one process within a second)."""
+    names = (re.match(r"events\.out\.tfevents\.(\d+)\.", f.name) for f in folder.glob("*"))
+    seconds = {int(m.group(1)) for m in names if m}
+    while int(time.time()) in seconds:  # at most a second (a file from a skewed clock: none)
+        time.sleep(0.05)
 
 
 def _markdown_code(text: str) -> str:
