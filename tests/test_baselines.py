@@ -141,6 +141,18 @@ def test_schedule_names_distinct_affordable_nodes():
         env.step(make_policy("tour-scheduler", 0)(mission))
 
 
+def test_schedule_still_uplinks_where_more_auvs_than_affordable_nodes():
+    """Four AUVs over the poorest of three nodes, two of which can afford an uplink: no
+    assignment of distinct nodes exists, so some AUVs stay idle and the others still name both
+    affordable nodes (every AUV falling back to its cheapest node would name the poor one)."""
+    mission = Mission(scenario_config(4, 3))
+    mission.reset(np.random.RandomState(0))
+    mission.network.energy_j[:] = [1000.0, 1000.0, 0.0]
+    over_poor = np.repeat(mission.network.nodes_m[2][None], 4, axis=0)
+    nodes = schedule_uplinks(mission, over_poor)
+    assert {0, 1} <= set(nodes.tolist())
+
+
 @pytest.mark.parametrize("n", [1, 2])
 def test_tour_scheduler_beats_the_planner_and_docks(n):
     rows = quick_evaluation(["planner", "tour-scheduler"], [n])

@@ -83,11 +83,9 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
         nodes = np.flatnonzero(can[i])
         best_first = nodes[np.argsort(-gain[nodes], kind="stable")][:per_auv]
         options.append([int(x) for x in best_first] or [-1])
-    combos = [
-        c
-        for c in itertools.product(*options)
-        if len({x for x in c if x >= 0}) == sum(x >= 0 for x in c)
-    ] or [tuple(-1 for _ in range(lanes))]
+    # where no assignment of distinct nodes exists (more AUVs than affordable nodes), lanes
+    # may also stay idle (-1), so that the others still uplink
+    combos = _distinct(options) or _distinct([o if o == [-1] else [*o, -1] for o in options])
     picks = np.array(combos, dtype=np.int64)  # (C, lanes)
     aoi = np.repeat(net.aoi[None], len(picks), axis=0)
     count = np.repeat(net.service_count[None], len(picks), axis=0)
@@ -103,6 +101,15 @@ def schedule_uplinks(mission: Mission, positions_m: FloatArray) -> IntArray:
         best = np.full(n, best[0])
     cheapest = np.argmin(req, axis=1)
     return np.where(best >= 0, best, cheapest).astype(np.int64)
+
+
+def _distinct(options: list[list[int]]) -> list[tuple[int, ...]]:
+    """Every choice of one option per lane in which no node (>= 0) is named twice."""
+    return [
+        c
+        for c in itertools.product(*options)
+        if len({x for x in c if x >= 0}) == sum(x >= 0 for x in c)
+    ]
 
 
 def _dock_turn_rad(mission: Mission) -> FloatArray:
