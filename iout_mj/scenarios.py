@@ -36,7 +36,7 @@ from iout_mj.config import (
     files_from_folder,
 )
 from iout_mj.errors import require_integer, require_seed
-from iout_mj.schema import ConfigError, load_mapping, require
+from iout_mj.schema import ConfigError, load_mapping, overlay, require
 
 LAYOUTS = ("paper", "random")
 """Layouts a caller may ask for; "custom" is what a config's or a file's own nodes give."""
@@ -176,19 +176,8 @@ def combined_mapping(configs: Sequence[Any]) -> dict[str, Any]:
             raise ConfigError(
                 f"config[{i}]={config!r:.80}: accepted a file path or a dict in a list of configs"
             )
-        merged = _overlay(merged, data)
+        merged = overlay(merged, data)
     return merged
-
-
-def _overlay(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
-    """`base` with `top`'s keys: mappings merged key by key, anything else replaced."""
-    out = dict(base)
-    for key, value in top.items():
-        below = out.get(key)
-        if isinstance(below, dict) and isinstance(value, dict):
-            value = _overlay(below, value)
-        out[key] = value
-    return out
 
 
 def fixed_config(n_auvs: int, n_nodes: int, base: ConfigLike = None) -> Config:

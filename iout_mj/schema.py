@@ -409,6 +409,54 @@ def load_mapping(path: str | Path, what: str) -> dict[str, Any]:
     return data
 
 
+MAX_BASES = 8
+"""Configs a `base:` chain may stack (a variant of a variant of ...)."""
+
+
+def overlay(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    """`base` with `top`'s keys: mappings merged key by key, anything else replaced."""
+    out = dict(base)
+    for key, value in top.items():
+        below = out.get(key)
+        if isinstance(below, dict) and isinstance(value, dict):
+            value = overlay(below, value)
+        out[key] = value
+    return out
+
+
+def load_layered(
+    path: str | Path,
+    what: str,
+    prepare: typing.Callable[[dict[str, Any], Path], dict[str, Any]] = lambda data, _: data,
+) -> dict[str, Any]:
+    """The mapping in a YAML or JSON file whose optional `base:` names the file it extends
+    (relative to its own folder): the base's mapping `overlay`-ed with this file's keys, up to
+    MAX_BASES files deep, no file twice. `prepare(data, folder)` adjusts each file's data as
+    read (its relative paths, from its own folder) before they are merged."""
+    path, layers, seen = Path(path), [], []
+    while True:
+        if path.resolve() in seen:
+            raise ConfigError(f"{what} {path} is its own base (through its bases): refused")
+        if len(seen) == MAX_BASES:
+            raise ConfigError(f"{what} {path}: bases stacked more than {MAX_BASES} deep: refused")
+        seen.append(path.resolve())
+        data = prepare(load_mapping(path, what), path.parent)
+        base = data.pop("base", None)
+        layers.append(data)
+        if base is None:
+            break
+        if not isinstance(base, str) or not base.strip():
+            raise ConfigError(
+                f"{what} {path}: base={shown(base)} is invalid: accepted the path of the "
+                "config file it extends, relative to its folder"
+            )
+        path = path.parent / base
+    merged: dict[str, Any] = {}
+    for layer in reversed(layers):
+        merged = overlay(merged, layer)
+    return merged
+
+
 def to_plain(value: Any) -> Any:
     """Nested dicts, lists and scalars (tuples become lists), for YAML and JSON."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):

@@ -204,6 +204,50 @@ def test_a_training_config_s_env_is_completed_as_an_env_config_file_is(tmp_path)
     assert train.env.channel.node_depths_m == (80.0, 90.0)
 
 
+def test_a_variant_config_is_its_base_with_its_own_keys_merged_in(tmp_path):
+    """`base:` names the config a file varies (from the file's folder): mappings merge key by
+    key, other values replace the base's; the shipped variants resolve to full configs."""
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "a.yaml").write_text(
+        "name: a\nn_auvs: 2\nphases: [{backend: kinematic, timesteps: 100}]\n"
+        "env: {physics: {current_jitter_mps: 0.5}, reward: {weights: {aoi: -0.2}}}\n"
+    )
+    (tmp_path / "b.yaml").write_text(
+        "base: sub/a.yaml\nname: b\nenv: {reward: {weights: {energy_margin: 0.0}}}\n"
+    )
+    b = TrainConfig.load(tmp_path / "b.yaml")
+    assert (b.name, b.n_auvs, b.total_timesteps) == ("b", 2, 100)
+    assert b.env.physics.current_jitter_mps == 0.5
+    assert (b.env.reward.weights.aoi, b.env.reward.weights.energy_margin) == (-0.2, 0.0)
+    assert b.env.reward.weights.dock_all == RewardWeights().dock_all != 0.0
+    aoi = TrainConfig.load(CONFIGS / "ppo-general-n3-aoi.yaml")
+    default = TrainConfig.load(CONFIGS / "ppo-general-n3.yaml")
+    assert aoi.n_auvs == 3 and aoi.imitation == default.imitation is not None
+    assert aoi.env.reward.weights.aoi == 10 * default.env.reward.weights.aoi
+    assert MarlConfig.load(CONFIGS / "mappo-n4.yaml").n_auvs == 4
+
+
+@pytest.mark.parametrize(
+    ("files", "match"),
+    [
+        ({"a.yaml": "base: a.yaml\nname: a\n"}, r"a.yaml is its own base"),
+        ({"a.yaml": "base: b.yaml\n", "b.yaml": "base: a.yaml\n"}, r"is its own base"),
+        ({f"c{i}.yaml": f"base: c{i + 1}.yaml\n" for i in range(10)}, "more than 8 deep"),
+        ({"a.yaml": "base: gone.yaml\n"}, r"gone.yaml does not exist"),
+        ({"a.yaml": "base: [x.yaml]\n"}, r"base=\['x.yaml'\] is invalid: accepted the path"),
+        ({"a.yaml": "base: ''\n"}, r"base='' is invalid"),
+    ],
+)
+def test_a_bad_base_is_refused_with_a_message(tmp_path, files, match):
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    first = next(iter(files))
+    with pytest.raises(ConfigError, match=match):
+        TrainConfig.load(tmp_path / first)
+    with pytest.raises(ConfigError, match=match):
+        MarlConfig.load(tmp_path / first)
+
+
 def test_the_realistic_channel_training_config_trains_on_the_shipped_channel():
     """The training config repeats the env file's channel block; the two must not drift."""
     env = Config.load(CONFIGS / "env" / "realistic-channel.yaml")

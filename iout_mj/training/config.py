@@ -17,7 +17,7 @@ from iout_mj.schema import (
     check_finite,
     check_types,
     in_range,
-    load_mapping,
+    load_layered,
     require,
 )
 
@@ -34,6 +34,14 @@ a token observation of up to ~4 kB each, so it stays under ~1 GB."""
 MAX_ENVS = 1024
 MAX_LAYERS, MAX_WIDTH = 8, 2048
 """net_arch: at most 8 layers of 2048 (33M parameters, 0.4 GB with Adam's moments)."""
+
+
+def env_files_from_folder(data: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """A training config's data with its env's relative file paths made absolute from `folder`
+    (the file's)."""
+    if not isinstance(data.get("env"), dict):
+        return data
+    return {**data, "env": files_from_folder(data["env"], folder)}
 
 
 def check_run_config(config: Any) -> None:
@@ -280,9 +288,8 @@ class TrainConfig:
 
     @classmethod
     def load(cls, path: str | Path) -> TrainConfig:
-        data = load_mapping(path, "training config")
-        if isinstance(data.get("env"), dict):  # its relative file paths: from its folder
-            data = {**data, "env": files_from_folder(data["env"], Path(path).parent)}
+        """A training config file; `base: <file>` in it names the config it varies."""
+        data = load_layered(path, "training config", env_files_from_folder)
         config: TrainConfig = build_dataclass(cls, data, Path(path).stem)
         return config
 

@@ -79,7 +79,7 @@ from iout_mj.schema import (
     ConfigError,
     build_dataclass,
     in_range,
-    load_mapping,
+    load_layered,
     require,
 )
 from iout_mj.training import marl_imitation
@@ -87,6 +87,7 @@ from iout_mj.training.config import (
     ImitationConfig,
     check_run_config,
     check_types,
+    env_files_from_folder,
     require_node_range,
 )
 from iout_mj.training.trainer import HELD_OUT_SEED
@@ -205,8 +206,9 @@ class MarlConfig:
 
     @classmethod
     def load(cls, path: str | Path) -> MarlConfig:
+        """A MARL config file; `base: <file>` in it names the config it varies."""
         config: MarlConfig = build_dataclass(
-            cls, load_mapping(path, "MARL config"), Path(path).stem
+            cls, load_layered(path, "MARL config", env_files_from_folder), Path(path).stem
         )
         return config
 
