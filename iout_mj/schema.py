@@ -433,7 +433,9 @@ def load_layered(
     (relative to its own folder): the base's mapping `overlay`-ed with this file's keys, up to
     MAX_BASES files deep, no file twice. `prepare(data, folder)` adjusts each file's data as
     read (its relative paths, from its own folder) before they are merged."""
-    path, layers, seen = Path(path), [], []
+    path = Path(path)
+    layers: list[dict[str, Any]] = []
+    seen: list[Path] = []
     while True:
         if path.resolve() in seen:
             raise ConfigError(f"{what} {path} is its own base (through its bases): refused")
