@@ -437,11 +437,12 @@ def load_layered(
     layers: list[dict[str, Any]] = []
     seen: list[Path] = []
     while True:
-        if path.resolve() in seen:
+        real = Path(os.path.realpath(path))  # (Path.resolve raises on a symlink loop)
+        if real in seen:
             raise ConfigError(f"{what} {path} is its own base (through its bases): refused")
         if len(seen) == MAX_BASES:
             raise ConfigError(f"{what} {path}: bases stacked more than {MAX_BASES} deep: refused")
-        seen.append(path.resolve())
+        seen.append(real)
         data = prepare(load_mapping(path, what), path.parent)
         base = data.pop("base", None)
         layers.append(data)

@@ -227,6 +227,15 @@ def test_a_variant_config_is_its_base_with_its_own_keys_merged_in(tmp_path):
     assert MarlConfig.load(CONFIGS / "mappo-n4.yaml").n_auvs == 4
 
 
+def test_a_symlink_loop_as_a_config_or_its_base_is_refused_with_a_message(tmp_path):
+    (tmp_path / "a.yaml").symlink_to(tmp_path / "b.yaml")
+    (tmp_path / "b.yaml").symlink_to(tmp_path / "a.yaml")
+    (tmp_path / "c.yaml").write_text("base: a.yaml\nname: c\n")
+    for name in ("a.yaml", "c.yaml"):
+        with pytest.raises(ConfigError, match=r"a.yaml cannot be opened"):
+            TrainConfig.load(tmp_path / name)
+
+
 @pytest.mark.parametrize(
     ("files", "match"),
     [
