@@ -141,6 +141,32 @@ def test_fence_at_area_edges():
     assert p.positions_m()[0, 0] == pytest.approx(0.0, abs=0.5)
 
 
+def test_fence_hold_needs_the_fence_and_a_large_heading_error():
+    xy = np.array([[0.2, 500.0], [500.0, 999.9], [500.0, 500.0], [500.0, 0.1]])
+    yaw = np.zeros(4)
+    setpoint = np.array([np.radians(90), np.radians(-100), np.radians(120), 2 * np.pi + 0.3])
+    held = vehicle.fence_hold(xy, yaw, setpoint, (1000.0, 1000.0))
+    assert held.tolist() == [True, True, False, False]  # inside / unwrapped 17 deg: no hold
+
+
+def pinned_on_fence(monkeypatch, turn_rad: float) -> float:
+    """y (m) after 3 slots of an AUV on the south fence in a 1.4 m/s south-east current, full
+    speed at -50 deg, told to head north-west (the trap the README traces)."""
+    monkeypatch.setattr(vehicle, "FENCE_TURN_RAD", turn_rad)
+    p = physics_at(4.0, heading=np.radians(-50), xy=(300.0, 0.0))
+    p.place_scene(np.zeros((CFG1.scenario.n_nodes, 2)), np.array([0.95, -0.99]))
+    for _ in range(3):
+        p.set_commands(np.array([np.radians(127)]), np.array([3.8]))
+        p.step(round(CFG1.scenario.slot_s / p.dt_s))
+    return float(p.positions_m()[0, 1])
+
+
+def test_fence_does_not_pin_a_hull_in_a_current(monkeypatch):
+    turn_rad = vehicle.FENCE_TURN_RAD
+    assert pinned_on_fence(monkeypatch, np.pi) < 1.0  # without the hold: the Munk trap
+    assert pinned_on_fence(monkeypatch, turn_rad) > 20.0
+
+
 def test_mission_maneuver_starts_where_its_episode_started():
     (man,) = [m for m in maneuvers() if m.name.startswith("mission")]
     offset = np.array(man.start_m) - np.array(CFG1.scenario.starts_m[0])

@@ -135,9 +135,14 @@ class AUVPhysics(engine.Physics):
         return _finite_shaped(name, values, (self.n_auvs, *tail), "one row per AUV")
 
     def set_commands(self, yaw_setpoint_rad: FloatArray, speed_setpoint_mps: FloatArray) -> None:
-        """Heading (unwrapped) and speed setpoints for the low-level servos."""
+        """Heading (unwrapped) and speed setpoints for the low-level servos; an AUV on the fence
+        and far off its heading turns before it drives (`vehicle.fence_hold`)."""
         yaw_setpoint_rad = self._per_auv("yaw_setpoint_rad", yaw_setpoint_rad)
         speed_setpoint_mps = self._per_auv("speed_setpoint_mps", speed_setpoint_mps)
+        hold = vehicle.fence_hold(
+            self.positions_m(), self.yaw_rad(), yaw_setpoint_rad, self.cfg.scenario.area_m
+        )
+        speed_setpoint_mps = np.where(hold, 0.0, speed_setpoint_mps)
         ctrl = self.data.ctrl
         ctrl[self._yaw_act] = yaw_setpoint_rad
         ctrl[self._thrust] = vehicle.thrust_command(np.asarray(speed_setpoint_mps), self.cfg)

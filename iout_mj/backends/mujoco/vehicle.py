@@ -26,6 +26,11 @@ The paper's torpedo (assets/auv.xml), with its sources:
 - Surge propeller: speed servo F = k_v (ctrl - u) with the drag feedforward in ctrl (set by the
   task once per slot), saturated at rho*C_d*S/2 * V_max^2 so the vehicle reaches V_max and no
   more. Yaw: heading servo (kp, kv) on the yaw joint, saturated at 150 N m.
+- Fence: the area's edges are joint limits the hull stops against. A hull held there in a
+  current meets the flow broadside, and its Munk moment can out-turn the heading servo while
+  the thrust presses it on (a trap that open water, where the hull drifts with the current,
+  never sets). So the autopilot turns before it drives: an AUV that starts a slot on the fence
+  more than 60 degrees off its heading setpoint holds its thrust for that slot (`fence_hold`).
 """
 
 from __future__ import annotations
@@ -46,6 +51,12 @@ SEABED_DEPTH_M = -30.0
 NODE_RADIUS_M = 8.0
 THRUST_GAIN_NSPM = vehicles.PAPER_TORPEDO.thrust_gain_nspm
 """k_v of the torpedo's surge speed servo, N per (m/s) of speed error."""
+FENCE_BAND_M = 0.5
+"""An AUV within this distance of the area's edge is on the fence."""
+FENCE_TURN_RAD = float(np.radians(60.0))
+"""Heading error beyond which an AUV on the fence holds its thrust for the slot: the trapped
+hulls traced in the README were 83 to 88 degrees off their setpoints; a hull in a normal turn
+(25 degrees a slot) is never held."""
 RUDDER = "rudder"
 """The REMUS's rudder side force (the validation's rudder steps; idle in missions)."""
 
@@ -84,6 +95,17 @@ def thrust_command(speed_mps: np.ndarray, cfg: Config) -> np.ndarray:
     """Servo input for a speed setpoint: setpoint plus the hull's drag feedforward / k_v."""
     gain = vehicles.get(cfg.physics.vehicle).thrust_gain_nspm
     return speed_mps + hull_drag_nspm2(cfg) * np.square(speed_mps) / gain
+
+
+def fence_hold(
+    xy_m: np.ndarray, yaw_rad: np.ndarray, yaw_setpoint_rad: np.ndarray, area_m: tuple[float, float]
+) -> np.ndarray:
+    """(N,) which AUVs (at (N, 2) positions, unwrapped yaw and yaw setpoints) are on the
+    area's fence and more than FENCE_TURN_RAD off their setpoint: their thrust waits a slot."""
+    side = np.asarray(area_m, dtype=float)
+    on_fence = np.any((xy_m < FENCE_BAND_M) | (xy_m > side - FENCE_BAND_M), axis=-1)
+    error = np.abs(np.angle(np.exp(1j * (yaw_setpoint_rad - yaw_rad))))
+    return on_fence & (error > FENCE_TURN_RAD)
 
 
 def auv_spec(cfg: Config) -> mujoco.MjSpec:
