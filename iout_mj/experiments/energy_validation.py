@@ -128,12 +128,30 @@ def _accepts_timestep(cfg: Config, dt_s: float) -> bool:
     return True
 
 
+OPEN_WATER_M = 2000.0
+"""The validation flies in open water: its area reaches this far beyond the scenario's on every
+side, and every pose is shifted by it. A replayed mission that drifts off its planned path (the
+REMUS's does, once, to the south edge) must not meet the fence: a joint limit and the
+autopilot's hold there (`vehicle.fence_hold`) are not the hull's energy."""
+
+
 def _physics(cfg: Config, dt_s: float) -> AUVPhysics:
     """One AUV of the config's vehicle and motion at timestep `dt_s` (whatever the config's N:
-    the meter sums every AUV's energy)."""
+    the meter sums every AUV's energy), in open water (`OPEN_WATER_M`)."""
     cfg = make_config(1, 7, base=cfg)
-    cfg = cfg.replace(physics=dataclasses.replace(cfg.physics, timestep_s=dt_s))
+    ax, ay = cfg.scenario.area_m
+    area_m = (ax + 2 * OPEN_WATER_M, ay + 2 * OPEN_WATER_M)
+    cfg = cfg.replace(
+        physics=dataclasses.replace(cfg.physics, timestep_s=dt_s),
+        scenario=dataclasses.replace(cfg.scenario, area_m=area_m),
+    )
     return AUVPhysics.from_config(cfg)
+
+
+def _place(physics: AUVPhysics, xy_m: tuple[float, float], heading_rad: float, v: float) -> None:
+    """One AUV at a scenario position (shifted into the open water), heading and speed."""
+    shifted = np.array([xy_m], dtype=float) + OPEN_WATER_M
+    physics.set_poses(shifted, np.array([heading_rad]), np.array([v]))
 
 
 def steady_state(cfg: Config, speeds_mps: tuple[float, ...] | None = None) -> list[dict]:
@@ -145,7 +163,7 @@ def steady_state(cfg: Config, speeds_mps: tuple[float, ...] | None = None) -> li
     settle, measure = round(SETTLE_S / physics.dt_s), round(MEASURE_S / physics.dt_s)
     rows = []
     for v in speeds_mps:
-        physics.set_poses(np.array([[100.0, 500.0]]), np.zeros(1), np.array([v]))
+        _place(physics, (100.0, 500.0), 0.0, v)
         physics.set_commands(np.zeros(1), np.array([v]))
         physics.step(settle)
         physics.meter.start()
@@ -170,11 +188,7 @@ def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
     physics = _physics(cfg, dt_s)
     m, slot_s = cfg.motion, cfg.scenario.slot_s
     nstep = round(slot_s / physics.dt_s)
-    physics.set_poses(
-        np.array([man.start_m]),
-        np.radians([man.start_heading_deg]),
-        np.array([man.start_speed_mps]),
-    )
+    _place(physics, man.start_m, float(np.radians(man.start_heading_deg)), man.start_speed_mps)
     measured, model, model_path, distance, ends = [], [], [], [], []
     for heading_deg, speed in zip(man.heading_deg, man.speed_mps, strict=True):
         start = physics.positions_m()[0]
@@ -190,7 +204,7 @@ def run_maneuver(cfg: Config, man: Maneuver, dt_s: float) -> dict[str, Any]:
         model.append(float(propulsion.slot_energy_j(speed, d, slot_s, m)))
         model_path.append(float(propulsion.slot_energy_j(speed, flown, slot_s, m)))
         distance.append(d)
-        ends.append(end.copy())
+        ends.append(end - OPEN_WATER_M)
     physics.free()
     return {
         "measured_j": np.array(measured),
