@@ -10,7 +10,12 @@ import pytest
 
 from iout_mj.backends.mujoco.physics import AUVPhysics
 from iout_mj.config import Config
-from iout_mj.experiments.energy_validation import maneuvers, steady_state, validate_vehicle
+from iout_mj.experiments.energy_validation import (
+    maneuvers,
+    run_maneuver,
+    steady_state,
+    validate_vehicle,
+)
 from iout_mj.scenarios import make_config
 
 
@@ -91,3 +96,12 @@ def test_physics_refuses_one_auv_s_pose_for_two_naming_the_shape():
     with pytest.raises(ValueError, match=r"speed_setpoint_mps has shape \(1,\); accepted: \(2,\)"):
         physics.set_commands(np.zeros(2), np.ones(1))
     physics.free()
+
+
+def test_the_replayed_mission_flies_in_open_water():
+    """The REMUS's replay of a planner's mission drifts south of the scenario's area; the
+    validation lets it (no fence), so its energy is the hull's alone."""
+    cfg = Config().with_vehicle("remus100")
+    (man,) = [m for m in maneuvers(cfg) if m.name.startswith("mission")]
+    ends = run_maneuver(cfg, man, cfg.physics.timestep_s)["end_m"]
+    assert ends[:, 1].min() < -10.0  # beyond the south edge, where the fence would stop it
