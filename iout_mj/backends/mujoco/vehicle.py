@@ -43,6 +43,7 @@ import numpy as np
 from iout_mj import vehicles
 from iout_mj.backends.mujoco import added_mass, names
 from iout_mj.config import Config
+from iout_mj.world.geometry import wrap_angle
 
 added_mass.load()  # the MJCF files name the plugin: MuJoCo must know it before reading them
 
@@ -104,7 +105,7 @@ def fence_hold(
     area's fence and more than FENCE_TURN_RAD off their setpoint: their thrust waits a slot."""
     side = np.asarray(area_m, dtype=float)
     on_fence = np.any((xy_m < FENCE_BAND_M) | (xy_m > side - FENCE_BAND_M), axis=-1)
-    error = np.abs(np.angle(np.exp(1j * (yaw_setpoint_rad - yaw_rad))))
+    error = np.abs(wrap_angle(yaw_setpoint_rad - yaw_rad))
     return on_fence & (error > FENCE_TURN_RAD)
 
 
