@@ -1,23 +1,27 @@
-"""MuJoCo Warp backend against the C backend on Warp's CPU device: same start states and
-actions, N = 2, K = 7, a few worlds, two slots (slow: Warp compiles its kernels on first use,
-~30 s, cached afterwards)."""
+"""MuJoCo Warp backend against the C backend on Warp's CPU device, and on the GPU where Warp
+sees one (skipped elsewhere; CI has none): same start states and actions, N = 2, K = 7, a few
+worlds, two slots (slow: Warp compiles its kernels on first use, ~30 s, cached afterwards)."""
 
 import numpy as np
 import pytest
 
 pytest.importorskip("mujoco_warp")
 
-from iout_mj.backends.mujoco.warp_stepper import WarpStepper
+from iout_mj.backends.mujoco.warp_stepper import WarpStepper, default_device
 from iout_mj.envs.batch import MissionBatch
 
 CONFIG = {"physics": {"current_jitter_mps": 0.5}}
 WORLDS = 8
+DEVICES = ["cpu", "cuda"]
+"""On "cuda" the substep loop runs as a captured CUDA graph."""
 
 
-def _pair() -> tuple[MissionBatch, MissionBatch]:
+def _pair(device: str) -> tuple[MissionBatch, MissionBatch]:
+    if device == "cuda" and default_device() != "cuda":
+        pytest.skip("Warp sees no GPU here")
     c = MissionBatch(WORLDS, "mujoco", 2, 7, "random", CONFIG, seed=11)
     w = MissionBatch(WORLDS, "mujoco", 2, 7, "random", CONFIG, seed=11)
-    w.stepper = WarpStepper(device="cpu")
+    w.stepper = WarpStepper(device=device)
     c.restart()
     w.restart()
     return c, w
@@ -31,8 +35,9 @@ ENERGY_TOLERANCE = (2e-4, 1e-2)
 
 
 @pytest.mark.slow
-def test_warp_matches_c_mujoco_over_two_slots():
-    c, w = _pair()
+@pytest.mark.parametrize("device", DEVICES)
+def test_warp_matches_c_mujoco_over_two_slots(device: str):
+    c, w = _pair(device)
     rng = np.random.RandomState(1)
     for slot in range(2):
         a = np.stack(
@@ -59,8 +64,9 @@ def test_warp_matches_c_mujoco_over_two_slots():
 
 
 @pytest.mark.slow
-def test_warp_flags_a_diverged_world_as_the_c_backend_does():
-    c, w = _pair()
+@pytest.mark.parametrize("device", DEVICES)
+def test_warp_flags_a_diverged_world_as_the_c_backend_does(device: str):
+    c, w = _pair(device)
     for b in (c, w):
         b.physics[1].data.qvel[:] = 1e30  # world 1 blows up
     a = np.tile([5, 3, 0, 1, 5, 3, 2, 3], (WORLDS, 1))
