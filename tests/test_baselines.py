@@ -217,3 +217,23 @@ def test_the_table_stays_aligned_with_a_policy_given_by_path():
     lines = format_table([row, {**row, "policy": "greedy"}]).splitlines()
     assert len({len(line) for line in lines}) == 1  # every row as wide as the header
     assert lines[1][len(row["policy"])] == " "  # the path does not run into N
+
+
+def test_an_evaluation_in_this_process_flies_its_policies_on_one_torch_thread(monkeypatch):
+    """As a worker does (`workers=1` runs here): then restores the caller's thread count."""
+    import torch
+
+    from iout_mj.experiments import evaluate as evaluation
+
+    episode, seen = evaluation._episode, []
+    monkeypatch.setattr(
+        evaluation, "_episode", lambda job: seen.append(torch.get_num_threads()) or episode(job)
+    )
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        rows = quick_evaluation(["ppo-general"], [1])
+        assert seen == [1, 1, 1] and len(rows) == 1  # three episodes, one cell
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
