@@ -1,21 +1,13 @@
 """Decision-time rollout search (`agents.search`): its model is the env's own on the kinematic
 backend, it never does worse than the policy it improves there, and it is reachable by name."""
 
-from pathlib import Path
-
 import gymnasium as gym
 import numpy as np
 import pytest
 
 from iout_mj.agents.policies import load_policy, read_trained, split_search
 from iout_mj.agents.rollout import run_episode
-from iout_mj.agents.search import (
-    DOCK_MARGIN_M,
-    LATE_PENALTY,
-    UNDOCKED_PENALTY,
-    RolloutSearch,
-    _copy_state,
-)
+from iout_mj.agents.search import LATE_PENALTY, UNDOCKED_PENALTY, RolloutSearch, _copy_state
 from iout_mj.envs.batch import MissionBatch
 from iout_mj.errors import PolicyError
 
@@ -107,30 +99,3 @@ def test_candidates_are_distinct_and_start_with_the_policy_action():
     actions = search._candidate_actions(tokens)
     assert len({tuple(a) for a in actions}) == len(actions) > 1
     np.testing.assert_array_equal(actions[0], base.act(tokens[None])[0])
-
-
-@pytest.mark.parametrize("backend", ["kinematic", "mujoco"])
-def test_the_rollouts_dock_only_inside_the_zone_by_the_backends_margin(backend):
-    env = gym.make("iout_mj/MultiAUV-v0", backend=backend, n_auvs=2, n_nodes=5)
-    search = RolloutSearch(read_trained("ppo-general", env), candidates=4)
-    radius_m = env.unwrapped.env_spec.config.scenario.dock_radius_m
-    rollouts = search._batch_for(env, 4)
-    assert rollouts.cfg.scenario.dock_radius_m == radius_m - DOCK_MARGIN_M[backend]
-    assert DOCK_MARGIN_M["mujoco"] > 0 == DOCK_MARGIN_M["kinematic"]
-
-
-@pytest.mark.slow
-def test_the_search_docks_the_auv_that_circled_the_zone_on_mujoco():
-    """N = 3, K = 20, Wenz noise with currents, seed 6: with the real zone in its rollouts the
-    search let one AUV circle 77 to 97 m from the dock's centre (radius 70 m) to the end."""
-    config = Path(__file__).parents[1] / "training/configs/env/wenz-current.yaml"
-    env = gym.make(
-        "iout_mj/MultiAUV-v0",
-        backend="mujoco",
-        n_auvs=3,
-        n_nodes=20,
-        layout="random",
-        config=config,
-    )
-    metrics = run_episode(env, load_policy("ppo-general+rollout", env, seed=6), seed=6)
-    assert metrics["docked"] == [True, True, True]

@@ -14,7 +14,6 @@ on MuJoCo the kinematic model predicts the physics (the same mission rules, the 
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import numpy as np
@@ -36,12 +35,6 @@ DOCK_MARGIN_SLOTS = {"kinematic": 0, "mujoco": 2, "warp": 2}
 flown env. The rollouts' kinematic model is exact on the kinematic backend; on MuJoCo an AUV
 answers its servos with lag, and a search without a margin docks at the last slot (55 of 55 in
 most N = 3, 4 episodes) and misses it in 10 to 30 % of them."""
-DOCK_MARGIN_M = {"kinematic": 0.0, "mujoco": 10.0, "warp": 10.0}
-"""How far inside the dock zone's edge a rollout must bring an AUV to dock it, per backend of
-the flown env (the rollouts' zone is the real one less this radius, at most half of it gone).
-On MuJoCo the model's end of a slot is 7 m from the hull's on average and 10 m at the 90th
-percentile, mostly along the track (the hull's speed lags its setpoint); a plan that enters the
-zone by less than that can miss it slot after slot."""
 
 
 class RolloutSearch:
@@ -103,21 +96,14 @@ class RolloutSearch:
         return np.array(out, dtype=np.int64)
 
     def _batch_for(self, env: Any, size: int) -> MissionBatch:
-        """A kinematic batch of `size` missions of the env's config with the dock zone shrunk by
-        `DOCK_MARGIN_M` (kept while it fits)."""
+        """A kinematic batch of `size` missions of the env's config (kept while it fits)."""
         spec = env.unwrapped.env_spec
-        key = (id(spec.config), spec.backend, size)
+        key = (id(spec.config), size)
         if self._batch is None or key != self._key:
             if self._batch is not None:
                 self._batch.close()
-            scenario = spec.config.scenario
-            radius_m = scenario.dock_radius_m
-            zone = dataclasses.replace(
-                scenario, dock_radius_m=max(radius_m - DOCK_MARGIN_M[spec.backend], radius_m / 2)
-            )
-            config = dataclasses.replace(spec.config, scenario=zone)
             # the config's nodes are placeholders: every copy brings the mission's own
-            self._batch = MissionBatch(size, "kinematic", config=config, observation="tokens")
+            self._batch = MissionBatch(size, "kinematic", config=spec.config, observation="tokens")
             self._key = key
         return self._batch
 
