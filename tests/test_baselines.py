@@ -226,9 +226,12 @@ def test_an_evaluation_in_this_process_flies_its_policies_on_one_torch_thread(mo
     from iout_mj.experiments import evaluate as evaluation
 
     episode, seen = evaluation._episode, []
-    monkeypatch.setattr(
-        evaluation, "_episode", lambda job: seen.append(torch.get_num_threads()) or episode(job)
-    )
+
+    def counted(job):  # the real episode, its torch threads noted
+        seen.append(torch.get_num_threads())
+        return episode(job)
+
+    monkeypatch.setattr(evaluation, "_episode", counted)
     before = torch.get_num_threads()
     torch.set_num_threads(2)
     try:
