@@ -1,7 +1,8 @@
 """Every `iout-mj` command of the README runs, in the order the README gives them within groups of
 commands that share a run or output folder (the groups are independent tests), shortened for CI:
-one episode per cell on the kinematic model, a few slots of video, a smoke training of the same
-kind (`shortened` says exactly what changes; `train-marl` trains smoke-mappo.yaml). A `--resume`
+one episode per cell and two training seeds on the kinematic model, a few slots of video, a
+smoke training of the same kind (`shortened` says exactly what changes; `train-marl` trains
+smoke-mappo.yaml). A `--resume`
 runs after the run it resumes; a training the README shows twice into one run folder starts it
 again (--overwrite); a training that differs from one already run only in its seed and run
 folder loads its own config and copies that run; the `bench` lines format the shipped run
@@ -51,10 +52,10 @@ def _values_end(argv: list[str], i: int) -> int:
 
 def shortened(argv: list[str]) -> list[str]:
     """The same command with CI-sized counts: the kinematic model for evaluations, one episode
-    per cell and one K, in this process (tests of `evaluate` cover its worker pool), 3 slots of
-    a small video, 128 training steps of the smoke config of the same kind (into the run folder
-    the README's config would use), 200 bootstrap resamples per confidence interval, benchmarks
-    as above."""
+    per cell, one K and at most two training seeds, in this process
+    (tests of `evaluate` cover its worker pool), 3 slots of a small video, 128 training steps
+    of the smoke config of the same kind (into the run folder the README's config would use),
+    200 bootstrap resamples per confidence interval, benchmarks as above."""
     a = list(argv)
     command = a[0]
     i = _option(a, "--episodes")
@@ -65,6 +66,9 @@ def shortened(argv: list[str]) -> list[str]:
         if i is not None:
             del a[i + 2 : _values_end(a, i)]
     if command == "evaluate":
+        i = _option(a, "--training-seeds")
+        if i is not None:  # two seeds resolve P-seed<k> as five do, at 2/5 of the episodes
+            del a[i + 3 : _values_end(a, i)]
         i = _option(a, "--backend")
         a = a[:i] + a[i + 2 :] if i is not None else a
         a += (
@@ -133,6 +137,11 @@ def test_shortening_keeps_the_command_and_its_options():
     marl = shortened(shlex.split("train-marl training/configs/mappo-n3.yaml"))
     assert marl == shlex.split(
         "train-marl training/configs/smoke-mappo.yaml --out runs/mappo-n3 --steps 256"
+    )
+    seeds = shortened(shlex.split("evaluate --policy runs/x/best --training-seeds 0 1 2 3 4"))
+    assert seeds == shlex.split(
+        "evaluate --policy runs/x/best --training-seeds 0 1 --backend kinematic --episodes 1"
+        " --workers 1"
     )
     train = shortened(shlex.split("train training/configs/ppo-general-n2.yaml --seed 1"))
     smoke = "training/configs/smoke-general.yaml"
