@@ -52,7 +52,7 @@ def _values_end(argv: list[str], i: int) -> int:
 
 def shortened(argv: list[str]) -> list[str]:
     """The same command with CI-sized counts: the kinematic model for evaluations, one episode
-    per cell, one K and at most two training seeds, in this process
+    per cell, one K, the first and last N and at most two training seeds, in this process
     (tests of `evaluate` cover its worker pool), 3 slots of a small video, 128 training steps
     of the smoke config of the same kind (into the run folder the README's config would use),
     200 bootstrap resamples per confidence interval, benchmarks as above."""
@@ -69,6 +69,9 @@ def shortened(argv: list[str]) -> list[str]:
         i = _option(a, "--training-seeds")
         if i is not None:  # two seeds resolve P-seed<k> as five do, at 2/5 of the episodes
             del a[i + 3 : _values_end(a, i)]
+        i = _option(a, "--n-auvs")
+        if i is not None:  # the smallest and largest team (`test_cli` flies every N)
+            del a[i + 2 : _values_end(a, i) - 1]
         i = _option(a, "--backend")
         a = a[:i] + a[i + 2 :] if i is not None else a
         a += (
@@ -138,10 +141,12 @@ def test_shortening_keeps_the_command_and_its_options():
     assert marl == shlex.split(
         "train-marl training/configs/smoke-mappo.yaml --out runs/mappo-n3 --steps 256"
     )
-    seeds = shortened(shlex.split("evaluate --policy runs/x/best --training-seeds 0 1 2 3 4"))
+    seeds = shortened(
+        shlex.split("evaluate --policy runs/x/best --training-seeds 0 1 2 3 4 --n-auvs 1 2 3 4")
+    )
     assert seeds == shlex.split(
-        "evaluate --policy runs/x/best --training-seeds 0 1 --backend kinematic --episodes 1"
-        " --workers 1"
+        "evaluate --policy runs/x/best --training-seeds 0 1 --n-auvs 1 4 --backend kinematic"
+        " --episodes 1 --workers 1"
     )
     train = shortened(shlex.split("train training/configs/ppo-general-n2.yaml --seed 1"))
     smoke = "training/configs/smoke-general.yaml"

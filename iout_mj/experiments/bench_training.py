@@ -59,11 +59,16 @@ class TrivialEnv(gym.Env):
         return self._obs, 0.0, False, self._t >= self._horizon, {}
 
 
-def ppo_fps(backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2) -> float:
+def ppo_fps(
+    backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2, n_steps: int = 512
+) -> float:
     """PPO steps/s (collection + updates) with the training configuration's hyperparameters
-    and vectorisation (`training.vec_env`: one in-process batch of `n_envs`); None =
-    `TrivialEnv` x `n_envs`, in-process too (DummyVecEnv)."""
-    cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs)
+    (rollouts of `n_steps` per env, minibatches of up to 512) and vectorisation
+    (`training.vec_env`: one in-process batch of `n_envs`); None = `TrivialEnv` x `n_envs`,
+    in-process too (DummyVecEnv)."""
+    cfg = TrainConfig(
+        n_auvs=n, n_nodes=k, n_envs=n_envs, n_steps=n_steps, batch_size=min(512, n_envs * n_steps)
+    )
     torch_setup(cfg)
     if backend is None:
         inner = DummyVecEnv([partial(TrivialEnv, n, k)] * n_envs)
