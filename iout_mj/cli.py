@@ -71,8 +71,7 @@ def _policy_help() -> str:
     return (
         f"{', '.join(BASELINES)}, a shipped policy ({shipped}; ppo-general and mappo pick "
         "ppo-general-n<N> and mappo-n<N> for the env's N) or a folder; P+rollout[C] flies a "
-        "general policy P with decision-time search (P+agent-rollout[C]: one AUV at a time), "
-        "P+dock any policy with the docking shield"
+        "general policy P with decision-time search, P+dock any policy with the docking shield"
     )
 
 

@@ -526,7 +526,6 @@ def cmd_list(args: argparse.Namespace) -> int:
             "ppo-general": "the shipped general policy for the env's N",
             "mappo": "the shipped MAPPO team policy (decentralised) for the env's N",
             "P+rollout[C]": "a general policy P with decision-time search (C candidates/slot)",
-            "P+agent-rollout[C]": "the same search one AUV at a time (C candidates/AUV/slot)",
             "P+dock": "any policy P with the docking shield",
         },
         "backends": {k: b.description for k, b in BACKENDS.items()},

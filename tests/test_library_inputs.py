@@ -89,7 +89,7 @@ def test_a_malformed_search_suffix_is_refused(suffix):
     # "+rollout-1" was looked up as a folder; "+rollout<Arabic-Indic 3>" flew 3 candidates
     with pytest.raises(PolicyError, match="C from 1 to 256"):
         split_search("ppo-general+rollout" + suffix)
-    assert split_search("runs/a+rollout7") == ("runs/a", 7, False)
+    assert split_search("runs/a+rollout7") == ("runs/a", 7)
 
 
 def test_load_policy_refuses_a_name_that_is_not_a_string(env_n2):

@@ -62,14 +62,12 @@ def test_an_auv_still_undocked_at_the_deadline_costs_the_late_penalty():
     np.testing.assert_allclose(scores[1] - scores[horizon], 2 * LATE_PENALTY)
 
 
-@pytest.mark.parametrize("per_agent", [False, True])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_the_search_never_ends_worse_than_its_policy_on_the_exact_model(seed, per_agent):
+def test_the_search_never_ends_worse_than_its_policy_on_the_exact_model(seed):
     env = _env(n_auvs=2, n_nodes=5)
     base = read_trained("ppo-general", env)
     plain = run_episode(env, base, seed=seed)
-    search = RolloutSearch(base, candidates=4, seed=seed, per_agent=per_agent)
-    searched = run_episode(env, search, seed=seed)
+    searched = run_episode(env, RolloutSearch(base, candidates=4, seed=seed), seed=seed)
     assert _score(searched) <= _score(plain) + 1e-9
 
 
@@ -81,17 +79,13 @@ def test_one_candidate_is_the_policy_itself():
 
 
 def test_the_search_is_named_after_the_policy_it_improves():
-    assert split_search("ppo-general+rollout") == ("ppo-general", 16, False)
-    assert split_search("runs/x-seed0/best+rollout8") == ("runs/x-seed0/best", 8, False)
-    assert split_search("ppo-general+agent-rollout4") == ("ppo-general", 4, True)
-    assert split_search("ppo-general") == ("ppo-general", None, False)
+    assert split_search("ppo-general+rollout") == ("ppo-general", 16)
+    assert split_search("runs/x-seed0/best+rollout8") == ("runs/x-seed0/best", 8)
+    assert split_search("ppo-general") == ("ppo-general", None)
     env = _env()
-    assert not load_policy("ppo-general+rollout4", env).per_agent
-    assert load_policy("ppo-general+agent-rollout", env).per_agent
+    assert isinstance(load_policy("ppo-general+rollout4", env), RolloutSearch)
     with pytest.raises(PolicyError, match="C from 1 to 256"):
         split_search("ppo-general+rollout0")
-    with pytest.raises(PolicyError, match=r"agent-rollout \(16 candidates per slot and AUV"):
-        split_search("ppo-general+agent-rollout1.5")
     with pytest.raises(PolicyError, match="general"):
         load_policy("ppo-n1-k7+rollout", gym.make("iout_mj/MultiAUV-v0", n_auvs=1))
 

@@ -177,33 +177,27 @@ def read_trained(name: str, env: Any, trust_pickle: bool = False) -> LoadedPolic
 
 SEARCH_SUFFIX = "+rollout"
 """`<trained policy>+rollout[C]`: the policy improved by decision-time rollouts (`search`)."""
-AGENT_SEARCH_SUFFIX = "+agent-rollout"
-"""`<trained policy>+agent-rollout[C]`: the same search one AUV at a time (`per_agent`)."""
 DEFAULT_CANDIDATES = 16
 
 
-def split_search(name: str) -> tuple[str, int | None, bool]:
-    """(the trained policy, candidates per slot (per AUV), one AUV at a time) of
-    `P+rollout[C]` or `P+agent-rollout[C]`; (name, None, False) otherwise."""
-    found = re.fullmatch(r"(.+)\+(agent-)?rollout([^/\\]*)", name, re.DOTALL)
+def split_search(name: str) -> tuple[str, int | None]:
+    """(the trained policy, candidates per slot) of `P+rollout[C]`; (name, None) otherwise."""
+    found = re.fullmatch(rf"(.+){re.escape(SEARCH_SUFFIX)}([^/\\]*)", name, re.DOTALL)
     if found is None:
-        return name, None, False
-    base, per_agent, count = found.groups()
-    suffix = AGENT_SEARCH_SUFFIX if per_agent else SEARCH_SUFFIX
+        return name, None
+    base, count = found.groups()
     if not re.fullmatch("[0-9]*", count) or (count and not 1 <= int(count) <= MAX_CANDIDATES):
         raise PolicyError(
-            f"policy {name!r}: accepted {base}{suffix} ({DEFAULT_CANDIDATES} candidates "
-            f"per slot{' and AUV' if per_agent else ''}) or {base}{suffix}<C> with C from 1 "
-            f"to {MAX_CANDIDATES}"
+            f"policy {name!r}: accepted {base}{SEARCH_SUFFIX} ({DEFAULT_CANDIDATES} candidates "
+            f"per slot) or {base}{SEARCH_SUFFIX}<C> with C from 1 to {MAX_CANDIDATES}"
         )
-    return base, int(count) if count else DEFAULT_CANDIDATES, per_agent is not None
+    return base, int(count) if count else DEFAULT_CANDIDATES
 
 
 def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) -> Any:
     """A callable `policy(env, obs) -> action`: a baseline name or a trained policy (name or
     folder), checked against `env`; `P+rollout[C]` is P improved by rollouts (`search`),
-    `P+agent-rollout[C]` searches one AUV at a time, `P+dock` is P with the docking shield
-    (`shield`)."""
+    `P+dock` is P with the docking shield (`shield`)."""
     if not isinstance(name, str) or not name:
         raise PolicyError(
             f"policy {name!r}: accepted a name ({', '.join(POLICIES)}, a shipped policy "
@@ -212,7 +206,7 @@ def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) 
     unshielded, shielded = split_shield(name)
     if shielded:
         return DockShield(load_policy(unshielded, env, seed, trust_pickle))
-    base, candidates, per_agent = split_search(name)
+    base, candidates = split_search(name)
     if candidates is not None:
         from iout_mj.agents.search import RolloutSearch  # the batch: imported when searched
 
@@ -223,7 +217,7 @@ def load_policy(name: str, env: Any, seed: int = 0, trust_pickle: bool = False) 
                 "policy (one actor per AUV): accepted it without +rollout"
             )
         try:
-            return RolloutSearch(loaded, candidates, seed, per_agent)
+            return RolloutSearch(loaded, candidates, seed)
         except ValueError as exc:
             raise PolicyError(f"policy {name!r}: {exc}") from exc
     if name in POLICIES:

@@ -10,13 +10,6 @@ rollout algorithm ("Rollout, Policy Iteration, and Distributed Reinforcement Lea
 ch. 2) with the policy as its base heuristic: where the model is exact (the kinematic
 backend) the result is never worse than the base policy's own choice, which is a candidate;
 on MuJoCo the kinematic model predicts the physics (the same mission rules, the paper's motion).
-
-`per_agent` searches one AUV at a time instead (Bertsekas's multiagent rollout, "Multiagent
-Rollout Algorithms and Reinforcement Learning", 2019): AUV 1's candidates (its own part of the
-chosen joint action, then samples of its part only) are scored with the others' parts as
-chosen so far, the best is kept, then AUV 2's, and so on; N batches of rollouts per slot, each
-varying 4 action entries rather than 4N, and the same guarantee on the exact model (each
-AUV's batch holds the joint action chosen so far); docked AUVs are skipped.
 """
 
 from __future__ import annotations
@@ -52,19 +45,15 @@ class RolloutSearch:
         candidates: joint actions tried per slot (the base action and candidates - 1 samples),
             an integer from 1 to `MAX_CANDIDATES`.
         seed: seeds the sampling of candidates (`reset(seed)` reseeds it per episode).
-        per_agent: search one AUV at a time (`candidates` per AUV and slot), not jointly.
     """
 
-    def __init__(
-        self, base: LoadedPolicy, candidates: int = 16, seed: int = 0, per_agent: bool = False
-    ) -> None:
+    def __init__(self, base: LoadedPolicy, candidates: int = 16, seed: int = 0) -> None:
         if not base.general:
             raise ValueError("rollout search needs a general (token) policy: accepted ppo-general")
         self.candidates = require_integer(candidates, "candidates", 1, MAX_CANDIDATES)
         self.base = base
         self.k_max = int(base.manifest["k_max"])
         self.rng = np.random.default_rng(require_seed(seed))
-        self.per_agent = per_agent
         self._batch: MissionBatch | None = None
         self._key: tuple[Any, ...] = ()
 
@@ -73,45 +62,28 @@ class RolloutSearch:
 
     def __call__(self, env: Any, obs: np.ndarray) -> np.ndarray:
         mission = env.unwrapped.mission
-        probs = self._probabilities(mission.observe_tokens(self.k_max))
+        tokens = mission.observe_tokens(self.k_max)
+        actions = self._candidate_actions(tokens)
+        if len(actions) == 1:
+            return actions[0]
+        batch = self._batch_for(env, len(actions))
+        _copy_state(mission, batch)
         spec = env.unwrapped.env_spec
         deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
-        chosen = probs.argmax(axis=1)
-        docked = mission.state.docked
-        parts = (
-            [slice(4 * i, 4 * i + 4) for i in range(len(docked)) if not docked[i]]
-            if self.per_agent
-            else [slice(None)]
-        )
-        for part in parts:
-            samples = self._samples(probs[part], chosen[part])
-            if len(samples) == 1:
-                continue
-            actions = np.repeat(chosen[None], len(samples), axis=0)
-            actions[:, part] = samples
-            batch = self._batch_for(env, len(actions))
-            _copy_state(mission, batch)
-            chosen = actions[int(np.argmin(self._scores(batch, actions, deadline)))]
-        return chosen
+        return actions[int(np.argmin(self._scores(batch, actions, deadline)))]
 
-    def _probabilities(self, tokens: np.ndarray) -> np.ndarray:
-        """(dims, max size) probabilities of each action entry under the base policy."""
+    def _candidate_actions(self, tokens: np.ndarray) -> np.ndarray:
+        """(C, dims) distinct joint actions: the deterministic one first, then samples."""
         self.base.check_observation(tokens[None])
         normalized = torch.as_tensor(self.base.normalizer(tokens[None]))
         with torch.no_grad():
             distribution = self.base.policy.get_distribution(normalized)
         assert isinstance(distribution, PaddedMultiCategorical)  # a token policy's
-        return distribution.log_probs[0].exp().numpy().astype(float)
-
-    def _candidate_actions(self, tokens: np.ndarray) -> np.ndarray:
-        """(C, dims) distinct joint actions: the deterministic one first, then samples."""
-        probs = self._probabilities(tokens)
-        return self._samples(probs, probs.argmax(axis=1))
-
-    def _samples(self, probs: np.ndarray, first: np.ndarray) -> np.ndarray:
-        """(C, dims) distinct actions of the entries `probs` gives: `first`, then samples."""
-        found = {tuple(first)}
-        out = [first]
+        log_probs = distribution.log_probs[0]  # (dims, max size)
+        probs = log_probs.exp().numpy().astype(float)
+        best = probs.argmax(axis=1)
+        found = {tuple(best)}
+        out = [best]
         tries = 0
         while len(out) < self.candidates and tries < 4 * self.candidates:
             tries += 1

@@ -242,7 +242,7 @@ def seed_variant(name: str, training_seed: int, n_auvs: int) -> str:
     unshielded, shielded = split_shield(name)
     if shielded:  # P+dock: training seed k of P, shielded
         return seed_variant(unshielded, training_seed, n_auvs) + DOCK_SUFFIX
-    base, candidates, _ = split_search(name)
+    base, candidates = split_search(name)
     if candidates is not None:  # P+rollout: training seed k of P, searched the same way
         return seed_variant(base, training_seed, n_auvs) + name[len(base) :]
     suffix = f"-seed{training_seed}"
