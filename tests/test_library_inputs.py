@@ -87,7 +87,7 @@ def test_baselines_refuse_bad_names_and_seeds():
 @pytest.mark.parametrize("suffix", ["-1", "1.5", "\u0663", "x"])
 def test_a_malformed_search_suffix_is_refused(suffix):
     # "+rollout-1" was looked up as a folder; "+rollout<Arabic-Indic 3>" flew 3 candidates
-    with pytest.raises(PolicyError, match="C from 1 to 256"):
+    with pytest.raises(PolicyError, match="C from 1 to 1024"):
         split_search("ppo-general+rollout" + suffix)
     assert split_search("runs/a+rollout7") == ("runs/a", 7)
 
@@ -114,7 +114,7 @@ def test_a_trained_policy_refuses_an_observation_of_another_scenario(env_n1, env
 def test_the_rollout_search_checks_its_candidates_seed_and_scenario(env_n1):
     base = load_policy_folder(resolve_policy_folder("ppo-general-n2"))
     for count in (0, 2.5, True, "3", 10**6):  # 2.5 flew 2, 10**6 was taken
-        with pytest.raises(UsageError, match=f"candidates=.* is invalid: {INTEGER} 1 to 256"):
+        with pytest.raises(UsageError, match=f"candidates=.* is invalid: {INTEGER} 1 to 1024"):
             RolloutSearch(base, count)
     with pytest.raises(UsageError, match="seed=-1 is invalid"):
         RolloutSearch(base, 4, -1)

@@ -84,7 +84,7 @@ def test_the_search_is_named_after_the_policy_it_improves():
     assert split_search("ppo-general") == ("ppo-general", None)
     env = _env()
     assert isinstance(load_policy("ppo-general+rollout4", env), RolloutSearch)
-    with pytest.raises(PolicyError, match="C from 1 to 256"):
+    with pytest.raises(PolicyError, match="C from 1 to 1024"):
         split_search("ppo-general+rollout0")
     with pytest.raises(PolicyError, match="general"):
         load_policy("ppo-n1-k7+rollout", gym.make("iout_mj/MultiAUV-v0", n_auvs=1))

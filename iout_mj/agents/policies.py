@@ -36,7 +36,7 @@ from iout_mj.envs.gym_env import ENV_ID
 from iout_mj.errors import PolicyError, PolicyMismatchError
 
 LEGACY_FILES = ("model.zip", "vecnormalize.pkl")
-MAX_CANDIDATES = 256
+MAX_CANDIDATES = 1024
 """Candidate joint actions a rollout search may try per slot."""
 ACTION_MAPPING = ("heading_levels", "speed_levels", "dtheta_max_deg", "dv_max_mps", "v_max_mps")
 """Motion settings that decide what an action index means: a policy needs the same."""
