@@ -52,11 +52,12 @@ def _values_end(argv: list[str], i: int) -> int:
 
 def shortened(argv: list[str]) -> list[str]:
     """The same command with CI-sized counts: the kinematic model for evaluations, one episode
-    per cell, one K, the first and last N and at most two training seeds, in this process
+    per cell, one K, the first and last N, at most two training seeds and at most 16 search
+    candidates per slot (the default), in this process
     (tests of `evaluate` cover its worker pool), 3 slots of a small video, 128 training steps
     of the smoke config of the same kind (into the run folder the README's config would use),
     200 bootstrap resamples per confidence interval, benchmarks as above."""
-    a = list(argv)
+    a = [re.sub(r"\+rollout(\d+)$", _at_most_16, t) for t in argv]  # compare's names too
     command = a[0]
     i = _option(a, "--episodes")
     if i is not None:
@@ -122,6 +123,11 @@ def shortened(argv: list[str]) -> list[str]:
     return a
 
 
+def _at_most_16(found: re.Match[str]) -> str:
+    """`+rollout<C>` with C capped at 16 (the search's cost grows with C)."""
+    return f"+rollout{min(int(found.group(1)), 16)}"
+
+
 def _same_training(argv: list[str]) -> tuple[str, ...]:
     """A shortened training without its seed, run folder and --overwrite."""
     drop = {_option(argv, f) for f in ("--seed", "--out")} - {None}
@@ -142,11 +148,14 @@ def test_shortening_keeps_the_command_and_its_options():
         "train-marl training/configs/smoke-mappo.yaml --out runs/mappo-n3 --steps 256"
     )
     seeds = shortened(
-        shlex.split("evaluate --policy runs/x/best --training-seeds 0 1 2 3 4 --n-auvs 1 2 3 4")
+        shlex.split(
+            "evaluate --policy runs/x/best ppo-general+rollout1024 ppo-general+rollout8"
+            " --training-seeds 0 1 2 3 4 --n-auvs 1 2 3 4"
+        )
     )
     assert seeds == shlex.split(
-        "evaluate --policy runs/x/best --training-seeds 0 1 --n-auvs 1 4 --backend kinematic"
-        " --episodes 1 --workers 1"
+        "evaluate --policy runs/x/best ppo-general+rollout16 ppo-general+rollout8"
+        " --training-seeds 0 1 --n-auvs 1 4 --backend kinematic --episodes 1 --workers 1"
     )
     train = shortened(shlex.split("train training/configs/ppo-general-n2.yaml --seed 1"))
     smoke = "training/configs/smoke-general.yaml"
