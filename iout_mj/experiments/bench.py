@@ -230,11 +230,12 @@ def run_all(quick: bool = False, say: Callable[[str], None] = lambda _: None) ->
             "N2_K13_single_env": channel["single_env"],
         }
     result["physics_batch"] = PHYSICS_BATCH
-    n_envs, rollouts, n_steps = (2, 1, 64) if quick else (PHYSICS_BATCH, 2, 512)
+    n_envs, rollouts = (2, 1) if quick else (PHYSICS_BATCH, 2)
+    rollout_steps = {"n_steps": 64} if quick else {}  # else the training configuration's
     fps = {}
     for backend in ("mujoco", "kinematic", None):
         say(f"PPO steps/s on {backend or 'a trivial env'}")
-        fps[backend] = ppo_fps(backend, 2, 7, n_envs, rollouts, n_steps)
+        fps[backend] = ppo_fps(backend, 2, 7, n_envs, rollouts, **rollout_steps)
     result["ppo_fps"] = {
         "physics": fps["mujoco"],
         "kinematic": fps["kinematic"],

@@ -60,15 +60,19 @@ class TrivialEnv(gym.Env):
 
 
 def ppo_fps(
-    backend: str | None, n: int, k: int, n_envs: int, rollouts: int = 2, n_steps: int = 512
+    backend: str | None,
+    n: int,
+    k: int,
+    n_envs: int,
+    rollouts: int = 2,
+    n_steps: int = TrainConfig.n_steps,
 ) -> float:
     """PPO steps/s (collection + updates) with the training configuration's hyperparameters
-    (rollouts of `n_steps` per env, minibatches of up to 512) and vectorisation
+    (rollouts of `n_steps` per env, its minibatch size at most) and vectorisation
     (`training.vec_env`: one in-process batch of `n_envs`); None = `TrivialEnv` x `n_envs`,
     in-process too (DummyVecEnv)."""
-    cfg = TrainConfig(
-        n_auvs=n, n_nodes=k, n_envs=n_envs, n_steps=n_steps, batch_size=min(512, n_envs * n_steps)
-    )
+    batch_size = min(TrainConfig.batch_size, n_envs * n_steps)
+    cfg = TrainConfig(n_auvs=n, n_nodes=k, n_envs=n_envs, n_steps=n_steps, batch_size=batch_size)
     torch_setup(cfg)
     if backend is None:
         inner = DummyVecEnv([partial(TrivialEnv, n, k)] * n_envs)
