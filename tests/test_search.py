@@ -1,9 +1,14 @@
 """Decision-time rollout search (`agents.search`): its model is the env's own on the kinematic
 backend, it never does worse than the policy it improves there, and it is reachable by name."""
 
+import re
+import subprocess
+import sys
+
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import ROOT
 
 from iout_mj.agents.policies import load_policy, read_trained, split_search
 from iout_mj.agents.rollout import run_episode
@@ -99,3 +104,12 @@ def test_candidates_are_distinct_and_start_with_the_policy_action():
     actions = search._candidate_actions(tokens)
     assert len({tuple(a) for a in actions}) == len(actions) > 1
     np.testing.assert_array_equal(actions[0], base.act(tokens[None])[0])
+
+
+def test_the_model_error_example_finds_the_rollout_model_close_to_the_physics_without_current():
+    script = ROOT / "training" / "examples" / "rollout_model_error.py"
+    out = subprocess.run(
+        [sys.executable, str(script), "--seeds", "1"], capture_output=True, text=True, check=True
+    ).stdout
+    ahead = float(re.search(r"model ahead along its track by (-?[0-9.]+) m", out).group(1))
+    assert re.match(r"[1-9][0-9]* AUV-slots", out) and abs(ahead) < 2.0  # 0.4 m over 5 seeds
