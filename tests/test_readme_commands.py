@@ -1,13 +1,12 @@
 """Every `iout-mj` command of the README runs, in the order the README gives them within groups of
 commands that share a run or output folder (the groups are independent tests), shortened for CI:
-one episode per cell and two training seeds on the kinematic model, a few slots of video, a
-smoke training of the same kind (`shortened` says exactly what changes; `train-marl` trains
-smoke-mappo.yaml). A `--resume`
-runs after the run it resumes; a training the README shows twice into one run folder starts it
-again (--overwrite); a training that differs from one already run only in its seed and run
-folder loads its own config and copies that run; the `bench` lines format the shipped run
-(benchmarks/results-2cpu.json; `test_cli` measures `bench --quick`) and `bench --warp` runs
-quick at B = 1."""
+one episode per cell, the first and last N and two training seeds on the kinematic model, a
+few slots of video, a smoke training of the same kind (`shortened` says exactly what changes;
+`train-marl` trains smoke-mappo.yaml). A `--resume` runs after the run it resumes; a training
+the README shows twice into one run folder starts it again (--overwrite); a training that
+differs from one already run only in its seed and run folder loads its own config and copies
+that run; the `bench` lines format the shipped run (benchmarks/results-2cpu.json; `test_cli`
+measures `bench --quick`) and `bench --warp` runs quick at B = 1."""
 
 import re
 import shlex
@@ -53,10 +52,10 @@ def _values_end(argv: list[str], i: int) -> int:
 def shortened(argv: list[str]) -> list[str]:
     """The same command with CI-sized counts: the kinematic model for evaluations, one episode
     per cell, one K, the first and last N, at most two training seeds and at most 16 search
-    candidates per slot (the default), in this process
-    (tests of `evaluate` cover its worker pool), 3 slots of a small video, 128 training steps
-    of the smoke config of the same kind (into the run folder the README's config would use),
-    200 bootstrap resamples per confidence interval, benchmarks as above."""
+    candidates per slot (the default), in this process (tests of `evaluate` cover its worker
+    pool), 3 slots of a small video, 128 training steps of the smoke config of the same kind
+    (into the run folder the README's config would use), 200 bootstrap resamples per
+    confidence interval, benchmarks as above."""
     a = [re.sub(r"\+rollout(\d+)$", _at_most_16, t) for t in argv]  # compare's names too
     command = a[0]
     i = _option(a, "--episodes")

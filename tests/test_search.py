@@ -12,7 +12,7 @@ from conftest import ROOT
 
 from iout_mj.agents.policies import load_policy, read_trained, split_search
 from iout_mj.agents.rollout import run_episode
-from iout_mj.agents.search import LATE_PENALTY, UNDOCKED_PENALTY, RolloutSearch, _copy_state
+from iout_mj.agents.search import LATE_PENALTY, UNDOCKED_PENALTY, RolloutSearch, copy_state
 from iout_mj.envs.batch import MissionBatch
 from iout_mj.errors import PolicyError
 
@@ -35,7 +35,7 @@ def test_a_copied_mission_flown_by_the_policy_ends_as_the_env_does():
     for _ in range(4):  # mid-mission
         env.step(base(env, None))
     batch = MissionBatch(2, "kinematic", config=env.unwrapped.env_spec.config, observation="tokens")
-    _copy_state(env.unwrapped.mission, batch)
+    copy_state(env.unwrapped.mission, batch)
     k_max = base.manifest["k_max"]
     done = False
     while not done:
@@ -61,7 +61,7 @@ def test_an_auv_still_undocked_at_the_deadline_costs_the_late_penalty():
     scores = {}
     for deadline in (horizon, horizon + 1, 1):  # nobody docks within one slot of the start
         batch = search._batch_for(env, len(first))
-        _copy_state(env.unwrapped.mission, batch)
+        copy_state(env.unwrapped.mission, batch)
         scores[deadline] = search._scores(batch, first, deadline)
     np.testing.assert_array_equal(scores[horizon], scores[horizon + 1])
     np.testing.assert_allclose(scores[1] - scores[horizon], 2 * LATE_PENALTY)

@@ -67,7 +67,7 @@ class RolloutSearch:
         if len(actions) == 1:
             return actions[0]
         batch = self._batch_for(env, len(actions))
-        _copy_state(mission, batch)
+        copy_state(mission, batch)
         spec = env.unwrapped.env_spec
         deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
         return actions[int(np.argmin(self._scores(batch, actions, deadline)))]
@@ -134,7 +134,7 @@ class RolloutSearch:
             actions = self.base.act(m.observe_tokens(self.k_max))
 
 
-def _copy_state(mission: Any, batch: MissionBatch) -> None:
+def copy_state(mission: Any, batch: MissionBatch) -> None:
     """Every row of `batch` set to the single mission's state (its live arrays broadcast)."""
     single = live_arrays(mission)
     for name, target in live_arrays(batch.mission).items():

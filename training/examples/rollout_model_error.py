@@ -18,8 +18,9 @@ import gymnasium as gym
 import numpy as np
 
 from iout_mj.agents.policies import load_policy
+from iout_mj.agents.search import copy_state
 from iout_mj.envs import ENV_ID
-from iout_mj.envs.batch import MissionBatch, live_arrays
+from iout_mj.envs.batch import MissionBatch
 from iout_mj.scenarios import resolve
 
 BINS_MPS = ((-np.inf, -0.5), (-0.5, 0.5), (0.5, np.inf))
@@ -42,9 +43,7 @@ def slot_errors(policy: str, config: str | None, n_auvs: int, n_nodes: int, seed
             action = fly(env, obs)
             start = mission.state.positions_m.copy()
             active = ~mission.state.docked.copy()
-            single = live_arrays(mission)
-            for name, target in live_arrays(model.mission).items():
-                target[...] = single[name]
+            copy_state(mission, model)
             model.move(action[None])
             obs, _, terminated, truncated, _ = env.step(action)
             done = terminated or truncated
