@@ -74,6 +74,8 @@ def main() -> None:
     parser.add_argument("--nodes", type=int, default=13, help="K, on the paper's layout")
     parser.add_argument("--seeds", type=int, default=5, help="episodes, seeds 0 to this - 1")
     args = parser.parse_args()
+    if args.seeds < 1:
+        parser.error(f"--seeds {args.seeds}: accepted an integer of at least 1")
     r = slot_errors(args.policy, args.config, args.n_auvs, args.nodes, args.seeds)
     print(
         f"{len(r['along'])} AUV-slots: model ahead along its track by {r['along'].mean():.1f} m "
