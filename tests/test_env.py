@@ -14,7 +14,7 @@ from iout_mj.envs import ENV_ID, MultiAUVEnv
 from iout_mj.experiments.bench_training import peak_rss_mb
 from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError
-from iout_mj.world.geometry import wrap_angle
+from iout_mj.world.geometry import slot_velocity_mps, unit_xy, wrap_angle
 
 BACKENDS = list(SINGLE_ENV_BACKENDS)  # the registry's one-env backends
 METRIC_KEYS = {
@@ -170,7 +170,7 @@ def test_network_and_energy_bookkeeping(backend):
     assert m.network.aoi[0] == 1.0  # third delivery resets
 
 
-def test_kinematic_slot_flies_the_setpoints_and_drifts_with_the_current():
+def test_kinematic_slot_holds_the_ground_speed_and_drifts_across_with_the_current():
     cfg = scenario(make_config(2, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0)
     cfg = cfg.replace(physics=dataclasses.replace(cfg.physics, current_mps=(0.1, -0.2)))
     env = make("kinematic", config=cfg)
@@ -180,11 +180,57 @@ def test_kinematic_slot_flies_the_setpoints_and_drifts_with_the_current():
     env.step(np.array([8, 5, 0, 0, 2, 1, 1, 1]))  # AUV 0: +15 deg, +0.267 m/s; AUV 1: -15, -0.267
     theta = np.radians([15.0, -15.0])  # (2 j / 10 - 1) * 25 deg from heading 0
     v = 1.0 + np.array([1.0, -1.0]) * 0.4 * 2 / 3  # (2 j / 6 - 1) * 0.4 m/s from 1 m/s
-    water = v[:, None] * 25.0 * np.stack([np.cos(theta), np.sin(theta)], -1)
-    np.testing.assert_allclose(m.state.positions_m, start + water + [[2.5, -5.0]], atol=1e-9)
+    heading = np.stack([np.cos(theta), np.sin(theta)], -1)
+    along = heading @ [0.1, -0.2]  # the current along each heading
+    across = np.array([0.1, -0.2]) - along[:, None] * heading
+    expected = start + (v[:, None] * heading + across) * 25.0
+    np.testing.assert_allclose(m.state.positions_m, expected, atol=1e-9)
     np.testing.assert_allclose(m.state.headings_rad, theta, atol=1e-12)
-    drag_w = 0.5 * 1000.0 * 0.006 * 3.0 * v**3 / 0.7  # rho C_d S v^3 / (2 eta)
+    water = v - along  # the speed through the water along the heading
+    drag_w = 0.5 * 1000.0 * 0.006 * 3.0 * water**3 / 0.7  # rho C_d S v^3 / (2 eta)
     np.testing.assert_allclose(m.state.propulsion_energy_j, drag_w * 25.0 + 40.0 * 25.0)
+
+
+def test_kinematic_slot_stops_at_v_max_through_the_water():
+    """Against a current along the heading the ground speed is at most V_max minus it."""
+    cfg = scenario(make_config(1, 7), start_jitter_m=0.0, start_heading_jitter_deg=0.0)
+    cfg = cfg.replace(physics=dataclasses.replace(cfg.physics, current_mps=(-0.5, 0.0)))
+    cfg = cfg.replace(motion=dataclasses.replace(cfg.motion, v_max_mps=1.2, initial_speed_mps=1.2))
+    env = make("kinematic", config=cfg)
+    env.reset(seed=0)
+    m = env.unwrapped.mission
+    start = m.state.positions_m.copy()
+    env.step(np.array([5, 3, 0, 0]))  # hold heading 0 (east) and 1.2 m/s
+    np.testing.assert_allclose(m.state.positions_m - start, [[(1.2 - 0.5) * 25.0, 0.0]], atol=1e-9)
+    drag_w = 0.5 * 1000.0 * 0.006 * 3.0 * 1.2**3 / 0.7
+    np.testing.assert_allclose(m.state.propulsion_energy_j, drag_w * 25.0 + 40.0 * 25.0)
+
+
+def test_slot_velocity_mirrors_the_kinematic_slot():
+    """`geometry.slot_velocity_mps` (the shield's model) moves an AUV as the compiled slot does,
+    with the thrust limit binding in some slots (V_max 1.5 m/s against up to 1 m/s)."""
+    cfg = scenario(make_config(3, 7), start_jitter_m=0.0)
+    cfg = cfg.replace(
+        physics=dataclasses.replace(cfg.physics, current_mps=(-0.6, 0.8)),
+        motion=dataclasses.replace(cfg.motion, v_max_mps=1.5),
+    )
+    env = make("kinematic", config=cfg)
+    env.reset(seed=0)
+    m = env.unwrapped.mission
+    rng = np.random.default_rng(0)
+    checked = limited = 0
+    for _ in range(12):
+        start = m.state.positions_m.copy()
+        env.step(rng.integers(0, env.action_space.nvec))
+        velocity = slot_velocity_mps(m.state.heading_sp, m.state.speed_sp, (-0.6, 0.8), 1.5)
+        moved = np.any(m.state.positions_m != start, axis=1)
+        np.testing.assert_allclose(
+            m.state.positions_m[moved], start[moved] + 25.0 * velocity[moved], atol=1e-9
+        )
+        along = unit_xy(m.state.heading_sp) @ [-0.6, 0.8]
+        limited += int(np.sum(moved & (m.state.speed_sp > 1.5 + along)))
+        checked += int(moved.sum())
+    assert checked >= 30 and limited >= 1
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -84,16 +84,26 @@ def test_training_config_is_validated_like_the_env_config(tmp_path, changes, mat
         TrainConfig.load(path)
 
 
-def test_the_kinematic_backend_drifts_with_the_current():
-    positions = []
-    for current in ([0.0, 0.0], [0.5, 0.0]):
+def test_the_kinematic_backend_drifts_with_the_current_across_the_heading():
+    """Heading about east at 1 m/s (the start's seeded jitter): a current from the north drifts
+    the AUV by its part across the heading; the part along it leaves the ground speed as is
+    (the speed servo holds it)."""
+    moves, headings = [], []
+    for current in ([0.0, 0.0], [0.0, -0.5], [0.5, 0.0]):
         env = gym.make(
             ENV_ID, backend="kinematic", n_auvs=1, config={"physics": {"current_mps": current}}
         )
         env.reset(seed=0)
+        start = env.unwrapped.mission.state.positions_m[0].copy()
         env.step(np.array([5, 3, 0, 0]))
-        positions.append(env.unwrapped.mission.state.positions_m[0].copy())
-    np.testing.assert_allclose(positions[1] - positions[0], [0.5 * 25, 0.0])
+        moves.append(env.unwrapped.mission.state.positions_m[0] - start)
+        headings.append(env.unwrapped.mission.state.heading_sp[0])
+    h = np.array([np.cos(headings[0]), np.sin(headings[0])])
+    assert headings[1] == headings[2] == headings[0] and abs(h[1]) < 0.1
+    for move, current in zip(moves[1:], ([0.0, -0.5], [0.5, 0.0]), strict=True):
+        across = np.asarray(current) - (h @ current) * h
+        np.testing.assert_allclose(move - moves[0], across * 25, atol=1e-9)
+    assert np.linalg.norm(moves[1] - moves[0]) > 12.0  # nearly all of the 0.5 m/s current
 
 
 def test_step_after_the_end_and_bad_seeds():

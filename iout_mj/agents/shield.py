@@ -24,6 +24,7 @@ from iout_mj.agents.baselines import CRUISE_MPS
 from iout_mj.agents.planners import TourScheduler
 from iout_mj.agents.rollout import EnvPolicy
 from iout_mj.types import BoolArray, IntArray
+from iout_mj.world.geometry import slot_velocity_mps
 
 DOCK_SPARE_SLOTS = 4.0
 """Slots to spare at the decision to head home (the planner keeps 2: it heads home from near
@@ -91,14 +92,15 @@ def _moves(
     mission: Any, positions_m: np.ndarray, heading_rad: np.ndarray, speed_mps: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """End positions (..., H, S, 2), headings and speeds (..., H, S) of one slot from the given
-    states (...) for every pair of heading and speed indices: the straight move plus the
-    current's drift, as the compiled rules move an AUV."""
+    states (...) for every pair of heading and speed indices, as the kinematic backend moves
+    an AUV (`slot_velocity_mps`)."""
     a, slot_s = mission.actions, mission.cfg.scenario.slot_s
+    v_max_mps = mission.cfg.motion.v_max_mps
     heading = heading_rad[..., None, None] + a.dtheta_rad[:, None]
-    speed = np.clip(speed_mps[..., None, None] + a.dv_mps, 0.0, mission.cfg.motion.v_max_mps)
+    speed = np.clip(speed_mps[..., None, None] + a.dv_mps, 0.0, v_max_mps)
     heading, speed = np.broadcast_arrays(heading, speed)
-    velocity = speed[..., None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-    ends = positions_m[..., None, None, :] + (velocity + mission.state.current_mps) * slot_s
+    velocity = slot_velocity_mps(heading, speed, mission.state.current_mps, v_max_mps)
+    ends = positions_m[..., None, None, :] + velocity * slot_s
     return ends, heading, speed
 
 

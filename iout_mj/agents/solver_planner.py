@@ -212,7 +212,9 @@ class SolverTour(TourScheduler):
 def _track_clearance_m(mission: Mission, targets_m: FloatArray) -> FloatArray:
     """The closest each AUV comes to the dock's centre over the next LOOKAHEAD_SLOTS slots if
     it turns toward its target as fast as it may and speeds toward the approach speed (the
-    kinematic model: setpoints take effect in their slot; the current drifts it)."""
+    planner's own model: setpoints take effect in their slot and the whole current drifts it,
+    where the backends hold the speed over the ground along the heading; kept as measured in
+    the README's tables)."""
     s, m, slot_s = mission.state, mission.cfg.motion, mission.cfg.scenario.slot_s
     pos, heading, speed = s.positions_m.copy(), s.heading_sp.copy(), s.speed_sp.copy()
     turn_rad = np.radians(m.dtheta_max_deg)

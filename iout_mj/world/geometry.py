@@ -32,3 +32,17 @@ def pairwise_distance_m(auv_xy: ArrayLike, nodes_xy: ArrayLike) -> FloatArray:
     """Distances (*batch, N, K) between N AUV positions and K node positions."""
     diff = np.asarray(auv_xy, dtype=float)[..., :, None, :] - np.asarray(nodes_xy)[..., None, :, :]
     return norm_xy(diff)
+
+
+def slot_velocity_mps(
+    heading_rad: ArrayLike, speed_mps: ArrayLike, current_mps: ArrayLike, v_max_mps: float
+) -> FloatArray:
+    """(..., 2) velocity over the ground of an AUV flying a slot at its heading and speed
+    setpoints in a current (the kinematic backend's move, C: `iout_kinematic_slot`): the speed
+    setpoint over the ground along the heading (the hull's servo holds it), at most V_max
+    through the water, plus the current's component across the heading."""
+    heading = unit_xy(np.asarray(heading_rad, dtype=float))
+    current = np.asarray(current_mps, dtype=float)
+    along = np.sum(heading * current, axis=-1, keepdims=True)
+    ground = np.minimum(np.asarray(speed_mps, dtype=float)[..., None], v_max_mps + along)
+    return ground * heading + (current - along * heading)
