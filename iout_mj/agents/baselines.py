@@ -13,7 +13,7 @@ import numpy as np
 
 from iout_mj.mission import Mission
 from iout_mj.types import BoolArray, FloatArray, IntArray
-from iout_mj.world.geometry import pairwise_distance_m, wrap_angle
+from iout_mj.world.geometry import pairwise_distance_m, slot_velocity_mps, wrap_angle
 
 NODE_REACHED_M = 60.0
 """A node is 'being visited' within this distance."""
@@ -33,19 +33,22 @@ def steer(
     mission: Mission, targets_m: FloatArray, speeds_mps: FloatArray, crab: bool = False
 ) -> tuple[IntArray, IntArray]:
     """Heading and speed indices that turn each AUV toward its target and toward a speed;
-    with `crab`, the heading also cancels the ocean current across the track."""
-    delta = targets_m - mission.state.positions_m
+    with `crab` in a current, the heading index whose move over the ground at the slot's speed
+    setpoint (the kinematic model, `slot_velocity_mps`) points closest at the target."""
+    s, a = mission.state, mission.actions
+    dv = speeds_mps - s.speed_sp
+    speed_index = np.abs(a.dv_mps[None, :] - dv[:, None]).argmin(axis=1)
+    delta = targets_m - s.positions_m
     want = np.arctan2(delta[:, 1], delta[:, 0])
-    if crab:
-        c = mission.state.current_mps
-        across = np.cos(want) * c[1] - np.sin(want) * c[0]  # to the left of the track
-        water = np.maximum(mission.state.speed_sp, 0.5)
-        want = want - np.arcsin(np.clip(across / water, -0.9, 0.9))
-    dtheta = wrap_angle(want - mission.state.heading_sp)
-    h = np.abs(mission.actions.dtheta_rad[None, :] - dtheta[:, None]).argmin(axis=1)
-    dv = speeds_mps - mission.state.speed_sp
-    s = np.abs(mission.actions.dv_mps[None, :] - dv[:, None]).argmin(axis=1)
-    return h, s
+    if crab and np.any(s.current_mps):
+        v_max_mps = mission.cfg.motion.v_max_mps
+        speed = np.clip(s.speed_sp + a.dv_mps[speed_index], 0.0, v_max_mps)  # the slot's setpoint
+        headings = s.heading_sp[:, None] + a.dtheta_rad[None, :]
+        ground = slot_velocity_mps(headings, speed[:, None], s.current_mps, v_max_mps)
+        track = np.arctan2(ground[..., 1], ground[..., 0])
+        return np.abs(wrap_angle(track - want[:, None])).argmin(axis=1), speed_index
+    dtheta = wrap_angle(want - s.heading_sp)
+    return np.abs(a.dtheta_rad[None, :] - dtheta[:, None]).argmin(axis=1), speed_index
 
 
 def approach_speed(distance_m: FloatArray, slot_s: float) -> FloatArray:

@@ -31,7 +31,7 @@ from iout_mj.agents.baselines import CRUISE_MPS, approach_speed
 from iout_mj.agents.planners import TourScheduler
 from iout_mj.mission import Mission
 from iout_mj.types import FloatArray
-from iout_mj.world.geometry import wrap_angle
+from iout_mj.world.geometry import slot_velocity_mps, wrap_angle
 
 SOLVER_ITERATIONS = 50
 """Iterations of PyVRP's search per solve: 150 or 400 found the same tours in all but one of
@@ -211,10 +211,8 @@ class SolverTour(TourScheduler):
 
 def _track_clearance_m(mission: Mission, targets_m: FloatArray) -> FloatArray:
     """The closest each AUV comes to the dock's centre over the next LOOKAHEAD_SLOTS slots if
-    it turns toward its target as fast as it may and speeds toward the approach speed (the
-    planner's own model: setpoints take effect in their slot and the whole current drifts it,
-    where the backends hold the speed over the ground along the heading; kept as measured in
-    the README's tables)."""
+    it turns toward its target as fast as it may and speeds toward the approach speed
+    (setpoints take effect in their slot; each slot moves it as the kinematic backend does)."""
     s, m, slot_s = mission.state, mission.cfg.motion, mission.cfg.scenario.slot_s
     pos, heading, speed = s.positions_m.copy(), s.heading_sp.copy(), s.speed_sp.copy()
     turn_rad = np.radians(m.dtheta_max_deg)
@@ -225,7 +223,6 @@ def _track_clearance_m(mission: Mission, targets_m: FloatArray) -> FloatArray:
         heading = heading + np.clip(wrap_angle(want - heading), -turn_rad, turn_rad)
         goal = approach_speed(np.linalg.norm(delta, axis=1), slot_s)
         speed = np.clip(speed + np.clip(goal - speed, -m.dv_max_mps, m.dv_max_mps), 0, None)
-        step = np.stack([np.cos(heading), np.sin(heading)], axis=1) * speed[:, None]
-        pos = pos + (step + s.current_mps) * slot_s
+        pos = pos + slot_velocity_mps(heading, speed, s.current_mps, m.v_max_mps) * slot_s
         closest = np.minimum(closest, np.linalg.norm(pos - mission.dock_m, axis=1))
     return closest

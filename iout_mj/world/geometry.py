@@ -41,7 +41,8 @@ def slot_velocity_mps(
     setpoints in a current (the kinematic backend's move, C: `iout_kinematic_slot`): the speed
     setpoint over the ground along the heading (the hull's servo holds it), at most V_max
     through the water, plus the current's component across the heading."""
-    heading = unit_xy(np.asarray(heading_rad, dtype=float))
+    angle = np.asarray(heading_rad, dtype=float)
+    heading = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # as C computes it
     current = np.asarray(current_mps, dtype=float)
     along = np.sum(heading * current, axis=-1, keepdims=True)
     ground = np.minimum(np.asarray(speed_mps, dtype=float)[..., None], v_max_mps + along)
