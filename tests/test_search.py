@@ -12,7 +12,13 @@ from conftest import ROOT
 
 from iout_mj.agents.policies import load_policy, read_trained, split_search
 from iout_mj.agents.rollout import run_episode
-from iout_mj.agents.search import LATE_PENALTY, UNDOCKED_PENALTY, RolloutSearch, copy_state
+from iout_mj.agents.search import (
+    LATE_PENALTY,
+    UNDOCKED_PENALTY,
+    RolloutSearch,
+    best_candidate,
+    copy_state,
+)
 from iout_mj.envs.batch import MissionBatch
 from iout_mj.errors import PolicyError
 
@@ -62,7 +68,7 @@ def test_an_auv_still_undocked_at_the_deadline_costs_the_late_penalty():
     for deadline in (horizon, horizon + 1, 1):  # nobody docks within one slot of the start
         batch = search._batch_for(env, len(first))
         copy_state(env.unwrapped.mission, batch)
-        scores[deadline] = search._scores(batch, first, deadline)
+        scores[deadline] = search._scores(batch, first, deadline)[0]
     np.testing.assert_array_equal(scores[horizon], scores[horizon + 1])
     np.testing.assert_allclose(scores[1] - scores[horizon], 2 * LATE_PENALTY)
 
@@ -74,6 +80,43 @@ def test_the_search_never_ends_worse_than_its_policy_on_the_exact_model(seed):
     plain = run_episode(env, base, seed=seed)
     searched = run_episode(env, RolloutSearch(base, candidates=4, seed=seed), seed=seed)
     assert _score(searched) <= _score(plain) + 1e-9
+
+
+def test_bits_break_only_exact_ties_of_the_score():
+    bits = np.array([1.0, 3.0, 2.0, 9.0])
+    assert best_candidate(np.array([5.0, 5.0, 5.0, 5.0 + 1e-6]), bits) == 1  # AoI first
+    assert best_candidate(np.array([5.0, 5.0, 5.0 + 1e-15, 4.0]), bits) == 3
+    assert best_candidate(np.array([2.0, 2.0, 2.0, 2.0]), np.zeros(4)) == 0  # then the first
+    assert best_candidate(np.array([1002.0, 1003.0, 1002.0, 1004.0]), bits) == 2
+
+
+def test_the_search_delivers_the_most_bits_among_its_tied_candidates():
+    """Every slot flown is one whose rollout has the least score and, among equal scores, the
+    most bits: the search's own rollouts, recomputed, agree with its choice all mission long."""
+    env = _env(n_auvs=2, n_nodes=5)
+    base = read_trained("ppo-general", env)
+    search = RolloutSearch(base, candidates=16, seed=1)
+    env.reset(seed=1)
+    search.reset(1)
+    horizon = env.unwrapped.env_spec.config.scenario.horizon_slots
+    decided_by_bits = 0
+    done = False
+    while not done:
+        tokens = env.unwrapped.mission.observe_tokens(search.k_max)
+        rng = search.rng.bit_generator.state
+        actions = search._candidate_actions(tokens)
+        batch = search._batch_for(env, len(actions))
+        copy_state(env.unwrapped.mission, batch)
+        scores, bits = search._scores(batch, actions, horizon)
+        search.rng.bit_generator.state = rng  # the search draws the same candidates
+        chosen = search(env, None)
+        pick = next(i for i, a in enumerate(actions) if np.array_equal(a, chosen))
+        tied = scores == scores.min()
+        assert tied[pick] and bits[pick] == bits[tied].max()
+        decided_by_bits += int(len(set(bits[tied])) > 1)
+        _, _, terminated, truncated, _ = env.step(chosen)
+        done = terminated or truncated
+    assert decided_by_bits > 0  # the rule was exercised (22 of 55 slots here)
 
 
 def test_one_candidate_is_the_policy_itself():

@@ -5,7 +5,8 @@ kinematic missions, one per candidate joint action: the trained policy's own det
 action and samples from its action distribution. Each candidate flies this slot, then the
 policy flies the rest of the mission deterministically; the candidate whose mission ends best
 (every AUV docked first, then docked `DOCK_MARGIN_SLOTS` before the horizon on MuJoCo, then the
-least mean AoI over T_max) is flown. This is Bertsekas's
+least mean AoI over T_max, then among exact ties the most bits delivered, then the earliest
+candidate) is flown: the issue's order of targets, so data never costs AoI. This is Bertsekas's
 rollout algorithm ("Rollout, Policy Iteration, and Distributed Reinforcement Learning", 2020,
 ch. 2) with the policy as its base heuristic: where the model is exact (the kinematic
 backend) the result is never worse than the base policy's own choice, which is a candidate;
@@ -35,6 +36,8 @@ DOCK_MARGIN_SLOTS = {"kinematic": 0, "mujoco": 2, "warp": 2}
 flown env. The rollouts' kinematic model is exact on the kinematic backend; on MuJoCo an AUV
 answers its servos with lag, and a search without a margin docks at the last slot (55 of 55 in
 most N = 3, 4 episodes) and misses it in 10 to 30 % of them."""
+SCORE_TIE = 1e-9
+"""Relative difference under which two rollout scores count as tied (float rounding only)."""
 
 
 class RolloutSearch:
@@ -70,7 +73,7 @@ class RolloutSearch:
         copy_state(mission, batch)
         spec = env.unwrapped.env_spec
         deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
-        return actions[int(np.argmin(self._scores(batch, actions, deadline)))]
+        return actions[best_candidate(*self._scores(batch, actions, deadline))]
 
     def _candidate_actions(self, tokens: np.ndarray) -> np.ndarray:
         """(C, dims) distinct joint actions: the deterministic one first, then samples."""
@@ -107,13 +110,17 @@ class RolloutSearch:
             self._key = key
         return self._batch
 
-    def _scores(self, batch: MissionBatch, first: np.ndarray, deadline: int) -> np.ndarray:
+    def _scores(
+        self, batch: MissionBatch, first: np.ndarray, deadline: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Each row's mission flown to its end, this slot's candidate then the base policy:
-        the mean AoI over T_max plus `UNDOCKED_PENALTY` per AUV not docked, taken when the
-        row ends (a row stepped past its end changes nothing that was scored), plus
-        `LATE_PENALTY` per AUV of a live row still undocked when the slot reaches `deadline`."""
+        (score, bits delivered). The score is the mean AoI over T_max plus `UNDOCKED_PENALTY`
+        per AUV not docked, taken when the row ends (a row stepped past its end changes nothing
+        that was scored), plus `LATE_PENALTY` per AUV of a live row still undocked when the
+        slot reaches `deadline`."""
         m = batch.mission
         scores = np.full(batch.n_envs, np.nan)
+        bits = np.zeros(batch.n_envs)
         late = np.zeros(batch.n_envs)
         actions = first
         while True:
@@ -129,9 +136,20 @@ class RolloutSearch:
                     + UNDOCKED_PENALTY * undocked
                     + LATE_PENALTY * late[e]
                 )
+                bits[e] = metrics["delivered_bits"]
             if not np.isnan(scores).any():
-                return scores
+                return scores, bits
             actions = self.base.act(m.observe_tokens(self.k_max))
+
+
+def best_candidate(scores: np.ndarray, bits: np.ndarray) -> int:
+    """The least score; among scores tied with it (to rounding) the most bits; then the first.
+
+    Ties are common: the AoI counts whole slots, and candidates that differ only in where an
+    AUV points often end with the same ages (N = 4, K = 5 on MuJoCo: the tie-break took the
+    search from 99 to 100 % of the best planner's data, its AoI level)."""
+    tied = np.flatnonzero(scores <= scores.min() + SCORE_TIE * max(1.0, abs(scores.min())))
+    return int(tied[np.argmax(bits[tied])])
 
 
 def copy_state(mission: Any, batch: MissionBatch) -> None:
