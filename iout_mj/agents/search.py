@@ -8,9 +8,10 @@ policy flies the rest of the mission deterministically; the candidate whose miss
 least mean AoI over T_max, then among exact ties the most bits delivered, then the earliest
 candidate) is flown: docking, AoI, then data, so data never costs AoI on the model. This is
 Bertsekas's rollout algorithm ("Rollout, Policy Iteration, and Distributed Reinforcement
-Learning", 2020, ch. 2) with the policy as its base heuristic: where the model is exact (the kinematic
-backend) the result is never worse than the base policy's own choice, which is a candidate;
-on MuJoCo the kinematic model predicts the physics (the same mission rules, the paper's motion).
+Learning", 2020, ch. 2) with the policy as its base heuristic: where the model is exact (the
+kinematic backend) the result is never worse than the base policy's own choice, which is a
+candidate; on MuJoCo the kinematic model predicts the physics (the same mission rules, the
+paper's motion).
 """
 
 from __future__ import annotations
