@@ -66,9 +66,7 @@ def test_an_auv_still_undocked_at_the_deadline_costs_the_late_penalty():
     first = search._candidate_actions(env.unwrapped.mission.observe_tokens(search.k_max))
     scores = {}
     for deadline in (horizon, horizon + 1, 1):  # nobody docks within one slot of the start
-        batch = search._batch_for(env, len(first))
-        copy_state(env.unwrapped.mission, batch)
-        scores[deadline] = search._scores(batch, first, deadline)[0]
+        scores[deadline] = search.rollouts(env, first, deadline)[0]
     np.testing.assert_array_equal(scores[horizon], scores[horizon + 1])
     np.testing.assert_allclose(scores[1] - scores[horizon], 2 * LATE_PENALTY)
 
@@ -105,9 +103,7 @@ def test_the_search_delivers_the_most_bits_among_its_tied_candidates():
         tokens = env.unwrapped.mission.observe_tokens(search.k_max)
         rng = search.rng.bit_generator.state
         actions = search._candidate_actions(tokens)
-        batch = search._batch_for(env, len(actions))
-        copy_state(env.unwrapped.mission, batch)
-        scores, bits = search._scores(batch, actions, horizon)
+        scores, bits = search.rollouts(env, actions, horizon)
         search.rng.bit_generator.state = rng  # the search draws the same candidates
         chosen = search(env, None)
         pick = next(i for i, a in enumerate(actions) if np.array_equal(a, chosen))

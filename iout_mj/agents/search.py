@@ -70,11 +70,17 @@ class RolloutSearch:
         actions = self._candidate_actions(tokens)
         if len(actions) == 1:
             return actions[0]
-        batch = self._batch_for(env, len(actions))
-        copy_state(mission, batch)
         spec = env.unwrapped.env_spec
         deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
-        return actions[best_candidate(*self._scores(batch, actions, deadline))]
+        return actions[best_candidate(*self.rollouts(env, actions, deadline))]
+
+    def rollouts(
+        self, env: Any, first: np.ndarray, deadline: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(score, bits) of each candidate in `first` flown from the env's mission (`_scores`)."""
+        batch = self._batch_for(env, len(first))
+        copy_state(env.unwrapped.mission, batch)
+        return self._scores(batch, first, deadline)
 
     def _candidate_actions(self, tokens: np.ndarray) -> np.ndarray:
         """(C, dims) distinct joint actions: the deterministic one first, then samples."""
