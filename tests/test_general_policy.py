@@ -23,7 +23,7 @@ from iout_mj.scenarios import make_config
 from iout_mj.schema import ConfigError, build_dataclass
 from iout_mj.training import imitation
 from iout_mj.training.config import ImitationConfig, TrainConfig
-from iout_mj.training.trainer import scenario_cells
+from iout_mj.training.trainer import scenario_cells, scenario_env
 
 
 def _tokens(n: int, k: int, seed: int = 0) -> tuple[np.ndarray, object]:
@@ -161,6 +161,25 @@ def test_general_training_config_round_trips_and_rejects_bad_values(tmp_path):
         ({"policy": "cnn"}, "policy"),
         ({"imitation": {"planner": "oracle"}}, "planner"),
         ({"imitation": {"rounds": -1}}, "rounds"),
+    ):
+        with pytest.raises(ConfigError, match=match):
+            build_dataclass(TrainConfig, {**cfg.to_dict(), **bad}, "general")
+
+
+def test_held_out_episodes_spread_over_eval_node_range():
+    cfg = TrainConfig.load(ROOT / "training/configs/ppo-general-n2.yaml")
+    assert cfg.eval_ks() == [11] * 20
+    spread = dataclasses.replace(cfg, eval_node_range=(3, 30))
+    ks = spread.eval_ks()
+    assert len(ks) == 20 and ks[0] == 3 and ks[-1] == 30 and ks == sorted(ks)
+    env = scenario_env(spread, "kinematic", 30)
+    env.reset(seed=0)
+    assert env.unwrapped.env_spec.n_nodes == 30 and env.unwrapped.env_spec.layout == "random"
+    env.close()
+    for bad, match in (
+        ({"eval_node_range": [2, 40]}, r"eval_node_range.*\[2, 40\].*<= 30"),
+        ({"eval_node_range": [9, 3]}, "eval_node_range.*low <= high"),
+        ({"policy": "mlp", "eval_node_range": [3, 9]}, "eval_node_range.*null with policy: mlp"),
     ):
         with pytest.raises(ConfigError, match=match):
             build_dataclass(TrainConfig, {**cfg.to_dict(), **bad}, "general")

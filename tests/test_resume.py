@@ -63,7 +63,8 @@ def general_config() -> TrainConfig:
         batch_size=64,
         n_epochs=1,
         eval_every_steps=ROLLOUT,
-        eval_episodes=1,
+        eval_episodes=2,
+        eval_node_range=(3, 5),  # held-out episodes on K = 3 and 5
         imitation=ImitationConfig(episodes=2, epochs=1, rounds=1, round_episodes=1, round_epochs=1),
         phases=(PhaseConfig("kinematic", PHASE), PhaseConfig("kinematic", 2 * ROLLOUT)),
         seed=1,  # PPO's seed (1) then differs from the first phase's environments' (1000)

@@ -52,12 +52,14 @@ def check_run_config(config: Any) -> None:
     require(bool(NAME.fullmatch(config.name)), "name", config.name, "letters, digits, - _ .")
 
 
-def require_node_range(node_range: tuple[int, int], alternative: str = "") -> None:
-    """A range of K: [low, high] within the nodes a config allows."""
+def require_node_range(
+    node_range: tuple[int, int], alternative: str = "", name: str = "node_range"
+) -> None:
+    """A range of K (the field `name`): [low, high] within the nodes a config allows."""
     lo, hi = node_range
     require(
         MIN_NODES <= lo <= hi <= MAX_NODES,
-        "node_range",
+        name,
         list(node_range),
         f"[low, high] with {MIN_NODES} <= low <= high <= {MAX_NODES}{alternative}",
     )
@@ -184,6 +186,9 @@ class TrainConfig:
     seed: int = 0
     eval_every_steps: int = 20_000
     eval_episodes: int = 10
+    eval_node_range: tuple[int, int] | None = None
+    """tokens: the held-out episodes' K, spread evenly over [low, high] (a policy for a range of
+    K selects its snapshot over that range); None: n_nodes in every episode."""
     torch_threads: int = 1
 
     def __post_init__(self) -> None:
@@ -212,6 +217,16 @@ class TrainConfig:
         )
         require(self.policy in POLICIES, "policy", self.policy, f"one of {POLICIES}")
         require_node_range(self.node_range)
+        if self.eval_node_range is not None:
+            require(
+                self.policy == "tokens",
+                "eval_node_range",
+                list(self.eval_node_range),
+                "null with policy: mlp (it flies one K)",
+            )
+            require_node_range(self.eval_node_range, name="eval_node_range")
+            for k in self.eval_node_range:  # a contradiction (own nodes) raises here
+                self.held_out_spec(k)
         require(
             bool(self.noise_models)
             and set(self.noise_models) <= set(NOISE_MODELS)
@@ -268,6 +283,17 @@ class TrainConfig:
         if narrowed is None:
             return list(range(lo, hi + 1))
         return [int(k) for k in np.linspace(narrowed[0], narrowed[1], hi - lo + 1).round()]
+
+    def eval_ks(self) -> list[int]:
+        """The K of each held-out episode (`eval_node_range`)."""
+        if self.eval_node_range is None:
+            return [self.env_spec.n_nodes] * self.eval_episodes
+        lo, hi = self.eval_node_range
+        return [int(k) for k in np.linspace(lo, hi, self.eval_episodes).round()]
+
+    def held_out_spec(self, n_nodes: int) -> EnvSpec:
+        """The scenario of a held-out episode with `n_nodes` nodes."""
+        return resolve(self.env, self.n_auvs, n_nodes, self.layout)
 
     @property
     def envs(self) -> int:

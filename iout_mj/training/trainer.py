@@ -60,10 +60,11 @@ HELD_OUT_SEED = 1_000_000
 """Evaluation seeds start here; training episodes draw theirs from the training seed."""
 
 
-def scenario_env(cfg: TrainConfig, backend: str) -> Any:
-    """The gymnasium env of the config's scenario (the warp backend's scenes are evaluated on
-    C MuJoCo: the same physics, one env)."""
-    return gym.make(ENV_ID, backend="mujoco" if backend == "warp" else backend, config=cfg.env_spec)
+def scenario_env(cfg: TrainConfig, backend: str, n_nodes: int | None = None) -> Any:
+    """The gymnasium env of the config's scenario, or of its held-out scenario with `n_nodes`
+    nodes (the warp backend's scenes are evaluated on C MuJoCo: the same physics, one env)."""
+    spec = cfg.env_spec if n_nodes is None else cfg.held_out_spec(n_nodes)
+    return gym.make(ENV_ID, backend="mujoco" if backend == "warp" else backend, config=spec)
 
 
 def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
@@ -128,16 +129,17 @@ def _lr_schedule(cfg: TrainConfig) -> Any:
 
 
 def evaluate_model(
-    model: Any, stats: Any, cfg: TrainConfig, backend: str, episodes: int, seed: int = HELD_OUT_SEED
+    model: Any, stats: Any, cfg: TrainConfig, backend: str, seed: int = HELD_OUT_SEED
 ) -> dict[str, float]:
-    """Deterministic episodes on held-out seeds: the mean episode summary and return."""
-    env = scenario_env(cfg, backend)
+    """Deterministic episodes on held-out seeds (their K: `TrainConfig.eval_ks`): the mean
+    episode summary and return."""
     loaded = LoadedPolicy(model.policy, Normalizer.from_vec_normalize(stats), network(cfg))
     rows = []
-    for e in range(episodes):
+    for e, k in enumerate(cfg.eval_ks()):
+        env = scenario_env(cfg, backend, k)
         metrics = run_episode(env, loaded, seed + e)
+        env.close()
         rows.append({"return": metrics["return"], **episode_summary(metrics)})
-    env.close()
     return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
 
 
@@ -323,9 +325,7 @@ def _train(
     def checkpoint(model: Any) -> None:
         """Evaluate; log it (TensorBoard first, see `logs.run_logger`), then save."""
         backend = cfg.phases[index].backend
-        metrics = evaluate_model(
-            model, model.get_vec_normalize_env(), cfg, backend, cfg.eval_episodes
-        )
+        metrics = evaluate_model(model, model.get_vec_normalize_env(), cfg, backend)
         state.num_timesteps = model.num_timesteps
         entry = {
             "num_timesteps": model.num_timesteps,
