@@ -185,13 +185,28 @@ def test_held_out_episodes_spread_over_eval_node_range():
             build_dataclass(TrainConfig, {**cfg.to_dict(), **bad}, "general")
 
 
+def test_imitation_node_range_spreads_the_imitation_cells_over_its_k():
+    cfg = TrainConfig.load(ROOT / "training/configs/ppo-general-n2.yaml")
+    assert cfg.imitation_ks() == list(range(3, 21)) == cfg.scenario_ks()
+    assert cfg.imitation is not None
+    wide = dataclasses.replace(
+        cfg, imitation=dataclasses.replace(cfg.imitation, node_range=(3, 30))
+    )
+    ks = wide.imitation_ks()
+    assert len(ks) == 18 and (ks[0], ks[-1]) == (3, 30) and wide.scenario_ks() == cfg.scenario_ks()
+    with pytest.raises(ConfigError, match=r"imitation.node_range.*\[5, 3\].*or null"):
+        build_dataclass(
+            TrainConfig, {**cfg.to_dict(), "imitation": {"node_range": [5, 3]}}, "general"
+        )
+
+
 def test_a_curriculum_phase_spreads_the_same_cells_over_its_k(tmp_path):
     cfg = TrainConfig.load(ROOT / "training/configs/ppo-general-n2-curriculum.yaml")
     assert cfg.imitation is None and cfg.total_timesteps == 10_000_000
     first = cfg.scenario_ks(0)
     assert len(first) == 18 and (min(first), max(first)) == (3, 6) and first == sorted(first)
     assert cfg.scenario_ks(2) == list(range(3, 21)) == cfg.scenario_ks()
-    ks = [k for k, _ in scenario_cells(cfg, 1)]
+    ks = [k for k, _ in scenario_cells(cfg, cfg.scenario_ks(1))]
     assert len(ks) == cfg.envs == 36 and (min(ks), max(ks)) == (3, 12)
     path = tmp_path / "c.yaml"
     path.write_text(json.dumps(cfg.to_dict()))

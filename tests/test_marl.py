@@ -283,6 +283,10 @@ def test_a_warm_started_run_records_its_rounds_and_resumes_without_repeating_the
         ({"minibatch_size": 100}, "must divide steps_per_batch"),
         ({"n_max": 1}, "n_max"),
         ({"layout": "paper"}, "random"),
+        (
+            {"imitation": ImitationConfig(node_range=(3, 9))},
+            r"imitation.node_range: accepted null for a team policy",
+        ),
     ],
 )
 def test_bad_configs_say_what_is_accepted(change, match):

@@ -65,7 +65,9 @@ def general_config() -> TrainConfig:
         eval_every_steps=ROLLOUT,
         eval_episodes=2,
         eval_node_range=(3, 5),  # held-out episodes on K = 3 and 5
-        imitation=ImitationConfig(episodes=2, epochs=1, rounds=1, round_episodes=1, round_epochs=1),
+        imitation=ImitationConfig(
+            episodes=2, epochs=1, rounds=1, round_episodes=1, round_epochs=1, node_range=(3, 5)
+        ),
         phases=(PhaseConfig("kinematic", PHASE), PhaseConfig("kinematic", 2 * ROLLOUT)),
         seed=1,  # PPO's seed (1) then differs from the first phase's environments' (1000)
     )

@@ -106,6 +106,9 @@ class ImitationConfig:
     teacher_dock_spare_slots: float | None = None
     """Slots the teacher keeps in hand when heading into the dock (tour-scheduler and
     solver-tour; null: the planner's own), so that a pupil's timing errors still dock."""
+    node_range: tuple[int, int] | None = None
+    """tokens: the K of the cells flown, spread over [low, high] as a phase's `node_range`
+    (the same number of cells); null: the config's node_range. Team policies: null."""
 
     def __post_init__(self) -> None:
         from iout_mj.agents.planners import TourScheduler
@@ -130,6 +133,8 @@ class ImitationConfig:
         in_range(self, "rounds", 0, 100)
         in_range(self, "beta", 0.0, 1.0)
         in_range(self, "learning_rate", 0.0, 1.0, low_open=True)
+        if self.node_range is not None:
+            require_node_range(self.node_range, ", or null", name="imitation.node_range")
 
     @property
     def total_episodes(self) -> int:
@@ -278,11 +283,17 @@ class TrainConfig:
         """The K of every scenario cell of one noise model, in `phase` (None: the config's
         node_range): as many cells as node_range spans, their K spread evenly over the
         phase's range (a curriculum keeps the rollout's size and the policy's env count)."""
+        return self._spread_ks(None if phase is None else self.phases[phase].node_range)
+
+    def imitation_ks(self) -> list[int]:
+        """The K of the imitation's cells of one noise model (`ImitationConfig.node_range`)."""
+        return self._spread_ks(None if self.imitation is None else self.imitation.node_range)
+
+    def _spread_ks(self, over: tuple[int, int] | None) -> list[int]:
         lo, hi = self.node_range
-        narrowed = None if phase is None else self.phases[phase].node_range
-        if narrowed is None:
+        if over is None:
             return list(range(lo, hi + 1))
-        return [int(k) for k in np.linspace(narrowed[0], narrowed[1], hi - lo + 1).round()]
+        return [int(k) for k in np.linspace(over[0], over[1], hi - lo + 1).round()]
 
     def eval_ks(self) -> list[int]:
         """The K of each held-out episode (`eval_node_range`)."""

@@ -165,6 +165,11 @@ class MarlConfig:
         in_range(self, "n_auvs", 1, MAX_AUVS)
         in_range(self, "n_max", self.n_auvs, MAX_AUVS)
         require_node_range(self.node_range)
+        if self.imitation is not None and self.imitation.node_range is not None:
+            raise ConfigError(
+                "imitation.node_range: accepted null for a team policy (its imitation flies "
+                "the team env's K, drawn from node_range)"
+            )
         require(self.layout == "random", "layout", self.layout, "random (K varies per episode)")
         # the scenario every episode resolves (K varies): N within the env's, no contradiction
         resolve(self.env, self.n_auvs, self.k_max, self.layout)

@@ -74,9 +74,9 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
     return Monitor(env)
 
 
-def scenario_cells(cfg: TrainConfig, phase: int | None = None) -> list[tuple[int, Config]]:
-    """(K, env config) of every scenario cell a general policy trains on (in `phase`, whose
-    node_range may narrow K: `TrainConfig.scenario_ks`)."""
+def scenario_cells(cfg: TrainConfig, ks: list[int] | None = None) -> list[tuple[int, Config]]:
+    """(K, env config) of every scenario cell a general policy trains on: each noise model
+    with each K of `ks` (a phase's `TrainConfig.scenario_ks`; None: the config's)."""
     cells = []
     for noise in cfg.noise_models:
         env = dataclasses.replace(
@@ -84,7 +84,7 @@ def scenario_cells(cfg: TrainConfig, phase: int | None = None) -> list[tuple[int
             acoustics=dataclasses.replace(cfg.env.acoustics, noise_model=noise),
             scenario=dataclasses.replace(cfg.env.scenario, n_auvs=cfg.env_spec.n_auvs),
         )
-        cells += [(k, env) for k in cfg.scenario_ks(phase)]
+        cells += [(k, env) for k in (cfg.scenario_ks() if ks is None else ks)]
     return cells
 
 
@@ -97,7 +97,7 @@ def vec_env(
     cells concurrently)."""
     if cfg.policy == "tokens":  # the cells step concurrently, one thread per core
         threads = usable_cpus() if parallel and backend == "mujoco" else 0
-        cells = scenario_cells(cfg, phase)
+        cells = scenario_cells(cfg, cfg.scenario_ks(phase))
         return VecMonitor(ScenarioVecEnv(cells, n_envs, backend, seed, threads))
     threads = min(n_envs, usable_cpus()) if parallel and backend == "mujoco" else 0
     kinds = {"kinematic": KinematicVecEnv, "mujoco": PhysicsVecEnv, "warp": WarpVecEnv}
@@ -175,7 +175,7 @@ def new_model(cfg: TrainConfig, venv: Any, device: str = "cpu") -> Any:
 
 
 def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> list[str]:
-    """DAgger from the config's planner (`training.imitation`) on the scenario cells; the
+    """DAgger from the config's planner (`training.imitation`) on its scenario cells; the
     return statistics of the planner's episodes become the VecNormalize's. With `progress`,
     a bar of the episodes flown (its round and fitting epoch beside it) and a line per round;
     returns those lines."""
@@ -183,7 +183,7 @@ def warm_start(model: Any, cfg: TrainConfig, progress: bool) -> list[str]:
     assert im is not None
     rng = np.random.RandomState(cfg.seed)
     torch.manual_seed(cfg.seed)
-    cells = scenario_cells(cfg)
+    cells = scenario_cells(cfg, cfg.imitation_ks())
     data = imitation.Demonstrations()
     epochs, beta, lines = im.epochs, im.beta, []
     bar = tqdm(
