@@ -74,9 +74,9 @@ def make_env(cfg: TrainConfig, backend: str, seed: int) -> Any:
     return Monitor(env)
 
 
-def scenario_cells(cfg: TrainConfig, ks: list[int] | None = None) -> list[tuple[int, Config]]:
+def scenario_cells(cfg: TrainConfig, ks: list[int]) -> list[tuple[int, Config]]:
     """(K, env config) of every scenario cell a general policy trains on: each noise model
-    with each K of `ks` (a phase's `TrainConfig.scenario_ks`; None: the config's)."""
+    with each K of `ks` (a phase's `TrainConfig.scenario_ks`, the imitation's `imitation_ks`)."""
     cells = []
     for noise in cfg.noise_models:
         env = dataclasses.replace(
@@ -84,7 +84,7 @@ def scenario_cells(cfg: TrainConfig, ks: list[int] | None = None) -> list[tuple[
             acoustics=dataclasses.replace(cfg.env.acoustics, noise_model=noise),
             scenario=dataclasses.replace(cfg.env.scenario, n_auvs=cfg.env_spec.n_auvs),
         )
-        cells += [(k, env) for k in (cfg.scenario_ks() if ks is None else ks)]
+        cells += [(k, env) for k in ks]
     return cells
 
 
