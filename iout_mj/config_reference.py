@@ -117,6 +117,57 @@ def fields(cfg: Config | None = None) -> list[FieldDoc]:
     return rows
 
 
+def training_fields() -> list[FieldDoc]:
+    """Every key of a training config (`iout-mj train`, `train-marl`) and of its phases and
+    imitation, with its default; what its checks accept, else its type. Its env config is
+    the env reference's (`env:`)."""
+    import typing
+
+    from iout_mj.training.config import ImitationConfig, PhaseConfig, TrainConfig
+    from iout_mj.training.marl import MarlConfig, MarlPhase
+
+    schema.ACCEPTED.clear()
+    sections: list[tuple[str, Any]] = [
+        ("train", TrainConfig(imitation=ImitationConfig())),
+        ("train: phases[]", PhaseConfig()),
+        ("train: imitation", ImitationConfig()),
+        ("train-marl", MarlConfig()),
+        ("train-marl: phases[]", MarlPhase()),
+    ]
+    rows = []
+    for section, instance in sections:
+        cls = type(instance)
+        docs, hints = _docstrings(cls), typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            if f.name in ("env", "phases", "imitation"):
+                continue  # sections of their own
+            accepted = _accepted(cls.__name__, f.name, section) or (_type_text(hints[f.name]),)
+            default = (
+                f.default if f.default is not dataclasses.MISSING else getattr(instance, f.name)
+            )
+            rows.append(
+                FieldDoc(section, f.name, default, unit(f.name), accepted, docs.get(f.name, ""))
+            )
+    return rows
+
+
+def _type_text(tp: Any) -> str:
+    """What a field's annotation accepts, in words (for keys no range check covers)."""
+    import types
+    import typing
+
+    args = typing.get_args(tp)
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return _type_text(next(a for a in args if a is not type(None))) + ", or null"
+    if typing.get_origin(tp) is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"a list of {_type_text(args[0]).removeprefix('a ').removeprefix('an ')}s"
+        return (
+            f"a list of {len(args)} {_type_text(args[0]).removeprefix('a ').removeprefix('an ')}s"
+        )
+    return {int: "an integer", float: "a number", str: "a string", bool: "true or false"}[tp]
+
+
 def _weights_docs(cls: type) -> dict[str, str]:
     for f in dataclasses.fields(cls):
         if f.name == "weights":
@@ -161,8 +212,28 @@ def markdown() -> str:
         "`config=`) sets only what it changes. `iout-mj config --dump` prints the same as a",
         "commented YAML file to start from.",
     ]
+    out += _tables(fields())
+    out += [
+        "",
+        "# Training config reference",
+        "",
+        "The keys of a training config (`iout-mj train CONFIG`, `iout-mj train-marl CONFIG`;",
+        "`training/configs/` holds the recipes). Every key is optional; `env:` is an env config",
+        "as above (its keys merge into the defaults), `base:` names a config this one varies",
+        "(a path from its own folder; mappings merge key by key, lists and values replace);",
+        "`phases:` is a list of the `phases[]` tables below, `imitation:` (DAgger from a planner",
+        "before PPO; null: none) the `imitation` table, for `train-marl` too, with `node_range`",
+        "null there.",
+    ]
+    out += _tables(training_fields())
+    return "\n".join(out) + "\n"
+
+
+def _tables(rows: list[FieldDoc]) -> list[str]:
+    """One Markdown table per section of `rows`."""
+    out: list[str] = []
     current = None
-    for row in fields():
+    for row in rows:
         if row.section != current:
             out += ["", f"## `{row.section}`", "", "| key | default | unit | accepted | meaning |"]
             out.append("| --- | --- | --- | --- | --- |")
@@ -172,4 +243,4 @@ def markdown() -> str:
             f"| `{row.name}` | `{_plain(row.default)}` | {row.unit} | {accepted} | "
             f"{row.doc.replace('|', '/')} |"
         )
-    return "\n".join(out) + "\n"
+    return out

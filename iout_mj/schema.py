@@ -191,6 +191,7 @@ def check_types(config: Any) -> None:
         converted = convert(hints[f.name], value, f.name)
         if converted is not value:
             object.__setattr__(config, f.name, converted)  # frozen: set once, while built
+    _owner[0] = cls.__name__  # (after its sections': the checks that follow note under it)
 
 
 def build_dataclass(cls: Any, data: Any, name: str) -> Any:

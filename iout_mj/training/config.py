@@ -198,7 +198,6 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_run_config(self)
-        self.env_spec  # noqa: B018 (resolves the scenario: a contradiction raises here)
         in_range(self, "n_envs", 1, MAX_ENVS)
         in_range(self, "n_steps", 1, MAX_ROLLOUT_STEPS)
         in_range(self, "batch_size", 1, MAX_ROLLOUT_STEPS)
@@ -230,8 +229,6 @@ class TrainConfig:
                 "null with policy: mlp (it flies one K)",
             )
             require_node_range(self.eval_node_range, name="eval_node_range")
-            for k in self.eval_node_range:  # a contradiction (own nodes) raises here
-                self.held_out_spec(k)
         require(
             bool(self.noise_models)
             and set(self.noise_models) <= set(NOISE_MODELS)
@@ -278,6 +275,10 @@ class TrainConfig:
                 "phases: node_range (a curriculum over K) is for policy: tokens; accepted null "
                 "with policy: mlp (one scenario)"
             )
+        # last: resolving builds env sections, whose checks note under their own names
+        self.env_spec  # noqa: B018 (resolves the scenario: a contradiction raises here)
+        for k in self.eval_node_range or ():
+            self.held_out_spec(k)
 
     def scenario_ks(self, phase: int | None = None) -> list[int]:
         """The K of every scenario cell of one noise model, in `phase` (None: the config's

@@ -171,8 +171,6 @@ class MarlConfig:
                 "the team env's K, drawn from node_range)"
             )
         require(self.layout == "random", "layout", self.layout, "random (K varies per episode)")
-        # the scenario every episode resolves (K varies): N within the env's, no contradiction
-        resolve(self.env, self.n_auvs, self.k_max, self.layout)
         require(1 <= len(self.phases) <= 16, "phases", len(self.phases), "1 to 16 phases")
         in_range(self, "steps_per_batch", 1, 1 << 18)
         in_range(self, "minibatch_size", 1, 1 << 18)
@@ -199,6 +197,9 @@ class MarlConfig:
                 f"minibatch_size={self.minibatch_size} must divide steps_per_batch="
                 f"{self.steps_per_batch}"
             )
+        # last (its env sections' checks note under their own names): the scenario every
+        # episode resolves (K varies), N within the env's, no contradiction
+        resolve(self.env, self.n_auvs, self.k_max, self.layout)
 
     @property
     def k_max(self) -> int:
