@@ -81,3 +81,22 @@ def test_top_level_help_names_every_command():
         assert command in out
     for command in ("figures", "train", "export", "sweep", "bench", "config", "list"):
         assert command in out
+
+
+def test_every_training_key_is_documented_with_what_it_accepts():
+    from dataclasses import fields
+
+    from iout_mj.training.config import TrainConfig
+    from iout_mj.training.marl import MarlConfig
+
+    rows = config_reference.training_fields()
+    assert all(r.accepted for r in rows), [r.name for r in rows if not r.accepted]
+    by_name = {(r.section, r.name): r for r in rows}
+    sections = {"env", "phases", "imitation"}
+    for section, cls in (("train", TrainConfig), ("train-marl", MarlConfig)):
+        keys = {name for s, name in by_name if s == section}
+        assert keys == {f.name for f in fields(cls)} - sections
+    assert by_name["train", "n_envs"].accepted[0] == "an integer in [1, 1024]"  # its check's
+    assert by_name["train", "eval_node_range"].accepted == ("a list of 2 integers, or null",)
+    assert by_name["train: imitation", "planner"].default == "tour-scheduler"
+    assert by_name["train-marl: phases[]", "agent_steps"].default == 100_000
