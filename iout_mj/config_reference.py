@@ -12,6 +12,8 @@ import dataclasses
 import inspect
 import itertools
 import json
+import types
+import typing
 from dataclasses import dataclass
 from typing import Any
 
@@ -121,8 +123,6 @@ def training_fields() -> list[FieldDoc]:
     """Every key of a training config (`iout-mj train`, `train-marl`) and of its phases and
     imitation, with its default; what its checks accept, else its type. Its env config is
     the env reference's (`env:`)."""
-    import typing
-
     from iout_mj.training.config import ImitationConfig, PhaseConfig, TrainConfig
     from iout_mj.training.marl import MarlConfig, MarlPhase
 
@@ -136,15 +136,13 @@ def training_fields() -> list[FieldDoc]:
     ]
     rows = []
     for section, instance in sections:
-        cls = type(instance)
-        docs, hints = _docstrings(cls), typing.get_type_hints(cls)
+        cls: Any = type(instance)
+        docs, hints = _docstrings(cls), schema.field_types(cls)
         for f in dataclasses.fields(cls):
             if f.name in ("env", "phases", "imitation"):
                 continue  # sections of their own
             accepted = _accepted(cls.__name__, f.name, section) or (_type_text(hints[f.name]),)
-            default = (
-                f.default if f.default is not dataclasses.MISSING else getattr(instance, f.name)
-            )
+            default = getattr(instance, f.name)  # (the instances hold the defaults)
             rows.append(
                 FieldDoc(section, f.name, default, unit(f.name), accepted, docs.get(f.name, ""))
             )
@@ -153,9 +151,6 @@ def training_fields() -> list[FieldDoc]:
 
 def _type_text(tp: Any) -> str:
     """What a field's annotation accepts, in words (for keys no range check covers)."""
-    import types
-    import typing
-
     args = typing.get_args(tp)
     if typing.get_origin(tp) in (typing.Union, types.UnionType):
         return _type_text(next(a for a in args if a is not type(None))) + ", or null"
