@@ -155,11 +155,9 @@ def _type_text(tp: Any) -> str:
     if typing.get_origin(tp) in (typing.Union, types.UnionType):
         return _type_text(next(a for a in args if a is not type(None))) + ", or null"
     if typing.get_origin(tp) is tuple:
-        if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list of {_type_text(args[0]).removeprefix('a ').removeprefix('an ')}s"
-        return (
-            f"a list of {len(args)} {_type_text(args[0]).removeprefix('a ').removeprefix('an ')}s"
-        )
+        item = _type_text(args[0]).removeprefix("a ").removeprefix("an ")
+        count = "" if args[-1] is Ellipsis else f"{len(args)} "
+        return f"a list of {count}{item}s"
     return {int: "an integer", float: "a number", str: "a string", bool: "true or false"}[tp]
 
 
