@@ -392,9 +392,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--results",
         required=True,
         nargs="+",
-        help="folders from evaluate --out (several: policies evaluated apart, read together)",
+        help="folders from evaluate --out (several: policies evaluated apart, read together; "
+        "with --grid each folder is a condition)",
     )
-    p.add_argument("--policy", required=True, help="the policy's name in the results")
+    p.add_argument(
+        "--policy",
+        required=True,
+        nargs="+",
+        help="the policy's name in the results (several with --grid)",
+    )
     p.add_argument(
         "--reference",
         default="tour-scheduler",
@@ -412,6 +418,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_at_least(0),
         default=0,
         help="seed of the bootstrap's resampling (default: 0)",
+    )
+    p.add_argument(
+        "--grid",
+        action="store_true",
+        help="each --results folder a condition (noise, currents) over the same cells: one "
+        "table of the cells by condition, every --policy's IQM ratio in each",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func="cmd_compare")

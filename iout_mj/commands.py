@@ -425,21 +425,24 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from iout_mj.experiments import compare
 
     folders = [Path(f) for f in args.results]
-    rows, episodes = compare.read_folders(folders)
+    policies = list(dict.fromkeys(args.policy))
+    if len(policies) > 1 and not args.grid:
+        raise UsageError(
+            f"--policy names {len(policies)} policies: accepted one, or several with --grid"
+        )
     print(
         f"compare: {args.bootstrap_reps:,} stratified-bootstrap resamples per interval (about "
         "a second per cell) ...",
         file=sys.stderr,
     )
-    result = compare.compare(
-        rows,
-        episodes,
-        args.policy,
-        args.reference,
-        reps=args.bootstrap_reps,
-        seed=args.bootstrap_seed,
-        results=folders[0] if len(folders) == 1 else None,
-    )
+    reps, seed = args.bootstrap_reps, args.bootstrap_seed
+    if args.grid:
+        found = compare.grid(folders, policies, args.reference, reps, seed)
+        print(json.dumps(found, indent=2) if args.json else compare.format_grid(found))
+        return 0
+    rows, episodes = compare.read_folders(folders)
+    one = folders[0] if len(folders) == 1 else None
+    result = compare.compare(rows, episodes, policies[0], args.reference, reps, seed, one)
     print(json.dumps(result, indent=2) if args.json else compare.format_markdown(result))
     return 0
 

@@ -244,3 +244,46 @@ def test_compare_reads_policies_evaluated_apart(planners, tmp_path, run):
     assert [[c[k] for k in keys] for c in apart] == [[c[k] for k in keys] for c in together]
     code, _, err = run("compare", "--results", tmp_path / "greedy", planners, *args)
     assert code == 2 and "both hold 'greedy' at N=1, K=5" in err
+
+
+def test_compare_grid_puts_conditions_side_by_side(planners, tmp_path, run):
+    """Each folder a condition: per cell every policy's IQM ratio and the first one's data share,
+    the same numbers `compare` gives folder by folder."""
+    wenz = tmp_path / "wenz"
+    code, _, _ = run(
+        *("evaluate", "--policy", "greedy", "planner", "tour-scheduler", "--n-auvs", "1", "2"),
+        *("--nodes", "5", "--episodes", "2", "--backend", "kinematic", "--workers", "1"),
+        *("--config", "training/configs/env/wenz.yaml", "--out", wenz),
+    )
+    assert code == 0
+    args = ("--reference", "best-planner", "--bootstrap-reps", "200")
+    policies = ("--policy", "greedy", "planner")
+    code, out, _ = run("compare", "--results", planners, wenz, *policies, *args, "--grid", "--json")
+    assert code == 0
+    found = json.loads(out)
+    assert [c["results"] for c in found["columns"]] == [str(planners), str(wenz)]
+    alone = {}
+    for folder in (planners, wenz):
+        for policy in ("greedy", "planner"):
+            code, out, _ = run("compare", "--results", folder, "--policy", policy, *args, "--json")
+            alone[folder, policy] = json.loads(out)
+    for column, folder in zip(found["columns"], (planners, wenz), strict=True):
+        assert column["comparisons"] == [alone[folder, p] for p in ("greedy", "planner")]
+
+    code, table, _ = run("compare", "--results", planners, wenz, *policies, *args, "--grid")
+    lines = table.splitlines()
+    assert lines[0] == f"| N | K | layout | backend | {planners.name} | wenz |"
+
+    def entry(folder):
+        greedy, planner = (alone[folder, p]["cells"][1] for p in ("greedy", "planner"))
+        share = 100 * greedy["policy_mbit"] / greedy["reference_mbit"]
+        return f"{greedy['ratio']:.3f} / {planner['ratio']:.3f}, {share:.1f} %"
+
+    assert lines[3] == f"| 2 | 5 | paper | kinematic | {entry(planners)} | {entry(wenz)} |"
+    below = sum(c["ratio"] < 1 for c in alone[wenz, "greedy"]["cells"])
+    normalised = alone[wenz, "greedy"]["aggregate"]["normalised_aoi_iqm"]
+    assert f"wenz: aggregate {normalised:.2f} [" in table
+    assert f"greedy below the best planner in {below} of 2 cells on the IQM" in table
+
+    code, _, err = run("compare", "--results", planners, *policies, *args)
+    assert code == 2 and "--policy names 2 policies: accepted one, or several with --grid" in err

@@ -74,9 +74,7 @@ class RolloutSearch:
         deadline = spec.config.scenario.horizon_slots - DOCK_MARGIN_SLOTS[spec.backend]
         return actions[best_candidate(*self.rollouts(env, actions, deadline))]
 
-    def rollouts(
-        self, env: Any, first: np.ndarray, deadline: int
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def rollouts(self, env: Any, first: np.ndarray, deadline: int) -> tuple[np.ndarray, np.ndarray]:
         """(score, bits) of each candidate in `first` flown from the env's mission (`_scores`)."""
         batch = self._batch_for(env, len(first))
         copy_state(env.unwrapped.mission, batch)

@@ -157,6 +157,7 @@ def compare(
                 "backend": cell[3],
                 "reference": name,
                 **stats,
+                "mean_ratio": mine["mean_aoi_horizon"] / ref["mean_aoi_horizon"],
                 "policy_docked": mine["docking_rate"],
                 "reference_docked": ref["docking_rate"],
                 "policy_mbit": mine["delivered_bits"] / 1e6,
@@ -200,6 +201,68 @@ def format_markdown(result: dict[str, Any]) -> str:
             f"| {r['policy_mbit']:.1f} | {r['reference_mbit']:.1f} |"
         )
     return "\n".join(lines) + "\n\n" + _aggregate_line(result)
+
+
+def grid(
+    folders: list[Path], policies: list[str], reference: str, reps: int = REPS, seed: int = 0
+) -> dict[str, Any]:
+    """Every policy against the reference in each folder, a folder a condition (noise,
+    currents: the same cells evaluated apart): `compare` per folder and policy, for one table
+    of the cells by condition."""
+    columns = []
+    for folder in folders:
+        rows, episodes = read_folders([folder])
+        found = [compare(rows, episodes, p, reference, reps, seed, folder) for p in policies]
+        columns.append({"results": str(folder), "comparisons": found})
+    return {"policies": policies, "reference": reference, "columns": columns}
+
+
+def format_grid(result: dict[str, Any]) -> str:
+    """The cells by condition: in each, every policy's IQM ratio to the reference (first / second
+    / ...) and the first policy's data as a share of the reference's; then per condition the
+    aggregate and how many cells the first policy is below the reference in."""
+    policies, columns = result["policies"], result["columns"]
+    names = [Path(c["results"]).name for c in columns]
+    by_cell = [
+        [{_cell_key(r): r for r in comparison["cells"]} for comparison in c["comparisons"]]
+        for c in columns
+    ]
+    keys = sorted({key for column in by_cell for key in column[0]})
+    head = "| N | K | layout | backend | "
+    lines = [head + " | ".join(names) + " |", "|---" * (4 + len(names)) + "|"]
+    for key in keys:
+        entries = [_grid_entry(column, key) for column in by_cell]
+        lines.append("| " + " | ".join(map(str, key)) + " | " + " | ".join(entries) + " |")
+    ref = "the best planner" if result["reference"] == BEST_PLANNER else result["reference"]
+    lines += [
+        "",
+        f"In each cell: the IQM of AoI(Tmax) of {' / '.join(policies)} over {ref}'s, and "
+        f"{policies[0]}'s data as a share of {ref}'s.",
+    ]
+    for name, column in zip(names, columns, strict=True):
+        cells = column["comparisons"][0]["cells"]
+        found = column["comparisons"]
+        aggregates = " / ".join(_ci(c["aggregate"], "normalised_aoi_iqm") for c in found)
+        lines.append(
+            f"{name}: aggregate {aggregates}; {policies[0]} below {ref} in "
+            f"{sum(c['ratio'] < 1 for c in cells)} of {len(cells)} cells on the IQM, "
+            f"{sum(c['mean_ratio'] < 1 for c in cells)} on the mean, docked in at least 95 % in "
+            f"{sum(c['policy_docked'] >= 0.95 for c in cells)}, at least the data in "
+            f"{sum(c['policy_mbit'] >= c['reference_mbit'] for c in cells)}"
+        )
+    return "\n".join(lines)
+
+
+def _cell_key(row: dict[str, Any]) -> Cell:
+    return row["n_auvs"], row["n_nodes"], row["layout"], row["backend"]
+
+
+def _grid_entry(column: list[dict[Cell, dict[str, Any]]], key: Cell) -> str:
+    if key not in column[0]:
+        return "-"
+    ratios = " / ".join(f"{c[key]['ratio']:.3f}" if key in c else "-" for c in column)
+    first = column[0][key]
+    return f"{ratios}, {100 * first['policy_mbit'] / first['reference_mbit']:.1f} %"
 
 
 def _ci(row: dict[str, Any], key: str) -> str:
