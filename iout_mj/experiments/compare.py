@@ -224,7 +224,7 @@ def format_grid(result: dict[str, Any]) -> str:
     policies, columns = result["policies"], result["columns"]
     names = [Path(c["results"]).name for c in columns]
     by_cell = [
-        [{_cell_key(r): r for r in comparison["cells"]} for comparison in c["comparisons"]]
+        [{cell_of(r): r for r in comparison["cells"]} for comparison in c["comparisons"]]
         for c in columns
     ]
     keys = sorted({key for column in by_cell for key in column[0]})
@@ -240,8 +240,8 @@ def format_grid(result: dict[str, Any]) -> str:
         f"{policies[0]}'s data as a share of {ref}'s.",
     ]
     for name, column in zip(names, columns, strict=True):
-        cells = column["comparisons"][0]["cells"]
         found = column["comparisons"]
+        cells = found[0]["cells"]
         aggregates = " / ".join(_ci(c["aggregate"], "normalised_aoi_iqm") for c in found)
         lines.append(
             f"{name}: aggregate {aggregates}; {policies[0]} below {ref} in "
@@ -251,10 +251,6 @@ def format_grid(result: dict[str, Any]) -> str:
             f"{sum(c['policy_mbit'] >= c['reference_mbit'] for c in cells)}"
         )
     return "\n".join(lines)
-
-
-def _cell_key(row: dict[str, Any]) -> Cell:
-    return row["n_auvs"], row["n_nodes"], row["layout"], row["backend"]
 
 
 def _grid_entry(column: list[dict[Cell, dict[str, Any]]], key: Cell) -> str:
