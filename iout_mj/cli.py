@@ -392,8 +392,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--results",
         required=True,
         nargs="+",
-        help="folders from evaluate --out (several: policies evaluated apart, read together; "
-        "with --grid each folder is a condition)",
+        help="folders from evaluate --out (several: policies evaluated apart, read together, "
+        "and a learned policy's training seeds evaluated apart pooled; with --grid each folder "
+        "is a condition)",
     )
     p.add_argument(
         "--policy",

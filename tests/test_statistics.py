@@ -246,6 +246,53 @@ def test_compare_reads_policies_evaluated_apart(planners, tmp_path, run):
     assert code == 2 and "both hold 'greedy' at N=1, K=5" in err
 
 
+def test_compare_pools_training_seeds_evaluated_apart(planners, tmp_path, run):
+    """A learned policy's training seeds evaluated one folder each compare as the same seeds
+    evaluated together; the same seed twice, or seeds under other conditions, are refused."""
+    shutil.copytree(SHIPPED_DIR / "ppo-general-n1", tmp_path / "pol")
+    shutil.copytree(SHIPPED_DIR / "ppo-general-n1-curriculum", tmp_path / "pol-seed1")
+    pol = str(tmp_path / "pol")
+    flown = ("--n-auvs", "1", "--nodes", "5", "--episodes", "2", "--backend", "kinematic")
+
+    def evaluate_seeds(out, *seeds, config=()):
+        code, _, _ = run(
+            *("evaluate", "--policy", pol, *flown, "--workers", "1", "--training-seeds"),
+            *seeds,
+            *config,
+            "--out",
+            tmp_path / out,
+        )
+        assert code == 0
+        return tmp_path / out
+
+    together, seed0, seed1 = (
+        evaluate_seeds("both", "0", "1"),
+        evaluate_seeds("s0", "0"),
+        evaluate_seeds("s1", "1"),
+    )
+    args = ("--policy", pol, "--reference", "best-planner", "--bootstrap-reps", "200", "--json")
+    results = []
+    for folders in ((together, planners), (seed0, seed1, planners)):
+        code, out, _ = run("compare", "--results", *folders, *args)
+        assert code == 0
+        results.append(json.loads(out))
+    (cell,), (pooled,) = (r["cells"] for r in results)
+    numbers = {k for k, v in cell.items() if isinstance(v, float)}
+    assert {k: pooled[k] for k in numbers} == pytest.approx({k: cell[k] for k in numbers})
+    assert {k: pooled[k] for k in cell.keys() - numbers} == {
+        k: cell[k] for k in cell.keys() - numbers
+    }
+    assert pooled["policy_docked"] in (0.0, 0.25, 0.5, 0.75, 1.0)  # 4 runs
+    assert results[1]["aggregate"] == results[0]["aggregate"]
+    assert results[1]["aggregate"]["training_seeds"] == 2
+
+    code, _, err = run("compare", "--results", seed0, together, planners, *args)
+    assert code == 2 and f"both hold {pol!r} at N=1, K=5 (seeds [0])" in err
+    wenz = evaluate_seeds("wenz", "1", config=("--config", "training/configs/env/wenz.yaml"))
+    code, _, err = run("compare", "--results", seed0, wenz, planners, *args)
+    assert code == 2 and "under other conditions (noise_model)" in err
+
+
 def test_compare_grid_puts_conditions_side_by_side(planners, tmp_path, run):
     """Each folder a condition: per cell every policy's IQM ratio and the first one's data share,
     the same numbers `compare` gives folder by folder."""

@@ -53,28 +53,72 @@ def read_episodes(results: Path) -> list[dict[str, Any]]:
 
 def read_folders(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The summary and episode rows of one or more evaluation folders, together (policies
-    evaluated apart: a learned policy over training seeds, a baseline on its own).
+    evaluated apart: a learned policy over training seeds, a baseline on its own). A learned
+    policy's cell in several folders, each with other training seeds of it under the same
+    condition, is pooled: one row whose measures are the means over all its runs.
 
     Raises:
         ResultFileError: a file is wrong (`read_rows`), or two folders hold the same policy
-            in the same cell.
+            in the same cell other than as disjoint training seeds under one condition.
     """
-    rows: list[dict[str, Any]] = []
     episodes: list[dict[str, Any]] = []
-    where: dict[tuple[str, Cell], Path] = {}
+    held: dict[tuple[str, Cell], list[tuple[Path, dict[str, Any], list[dict[str, Any]]]]] = {}
     for folder in folders:
-        folder_rows = read_rows(folder)
-        for row in folder_rows:
-            key = (row["policy"], cell_of(row))
-            if key in where:
-                raise ResultFileError(
-                    f"{folder} and {where[key]} both hold {key[0]!r} at N={key[1][0]}, "
-                    f"K={key[1][1]}: accepted folders that hold each policy's cell once"
-                )
-            where[key] = folder
-        rows += folder_rows
-        episodes += read_episodes(folder)
-    return rows, episodes
+        folder_episodes = read_episodes(folder)
+        for row in read_rows(folder):
+            key = _key(row)
+            runs = [e for e in folder_episodes if _key(e) == key]
+            for before in held.get(key, []):
+                _check_poolable(key, (folder, row, runs), before)
+            held.setdefault(key, []).append((folder, row, runs))
+        episodes += folder_episodes
+    return [_pooled(parts) for parts in held.values()], episodes
+
+
+def _key(row: dict[str, Any]) -> tuple[str, Cell]:
+    return row["policy"], cell_of(row)
+
+
+CONDITION = ("noise_model", "max_current_mps", "channel")
+"""What a cell's label leaves out and pooled rows must share."""
+
+Part = tuple[Path, dict[str, Any], list[dict[str, Any]]]
+"""A folder's row of a policy's cell, and the cell's runs there."""
+
+
+def _check_poolable(key: tuple[str, Cell], new: Part, old: Part) -> None:
+    (folder, row, runs), (other, first, before) = new, old
+    seeds = {e.get("training_seed") for e in runs}
+    earlier = {e.get("training_seed") for e in before}
+    where = f"{folder} and {other} both hold {key[0]!r} at N={key[1][0]}, K={key[1][1]}"
+    if not runs or not before:
+        raise ResultFileError(f"{where}, but not its episodes in both: {HINT}, unchanged")
+    if None in seeds | earlier or seeds & earlier:
+        shared = "as a baseline" if None in seeds | earlier else f"seeds {sorted(seeds & earlier)}"
+        raise ResultFileError(
+            f"{where} ({shared}): accepted folders that hold each policy's cell once, or a "
+            "learned policy's disjoint training seeds (`evaluate --training-seeds`)"
+        )
+    differ = [c for c in CONDITION if row.get(c) != first.get(c)]
+    if differ:
+        raise ResultFileError(
+            f"{where} under other conditions ({', '.join(differ)}): accepted training seeds "
+            "pooled from evaluations of one condition"
+        )
+
+
+def _pooled(parts: list[Part]) -> dict[str, Any]:
+    """A cell's row, or its rows from several folders as one: each measure the mean over all
+    the runs (a folder's row holds the mean over its own)."""
+    if len(parts) == 1:
+        return parts[0][1]
+    weights = [len(runs) for _, _, runs in parts]
+    row = dict(parts[0][1]) | {
+        m: float(np.average([r[m] for _, r, _ in parts], weights=weights)) for m in MEASURES
+    }
+    row["episodes"] = sum(weights)
+    row["training_seeds"] = len({e.get("training_seed") for _, _, runs in parts for e in runs})
+    return {k: v for k, v in row.items() if not k.endswith("_std")}
 
 
 def _positive_aoi(row: dict[str, Any], where: str) -> None:
