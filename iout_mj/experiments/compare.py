@@ -88,13 +88,14 @@ Part = tuple[Path, dict[str, Any], list[dict[str, Any]]]
 
 def _check_poolable(key: tuple[str, Cell], new: Part, old: Part) -> None:
     (folder, row, runs), (other, first, before) = new, old
-    seeds = {e.get("training_seed") for e in runs}
-    earlier = {e.get("training_seed") for e in before}
+    seeds: set[int | None] = {e.get("training_seed") for e in runs}
+    earlier: set[int | None] = {e.get("training_seed") for e in before}
     where = f"{folder} and {other} both hold {key[0]!r} at N={key[1][0]}, K={key[1][1]}"
     if not runs or not before:
         raise ResultFileError(f"{where}, but not its episodes in both: {HINT}, unchanged")
     if None in seeds | earlier or seeds & earlier:
-        shared = "as a baseline" if None in seeds | earlier else f"seeds {sorted(seeds & earlier)}"
+        twice = sorted(s for s in seeds & earlier if s is not None)
+        shared = "as a baseline" if None in seeds | earlier else f"seeds {twice}"
         raise ResultFileError(
             f"{where} ({shared}): accepted folders that hold each policy's cell once, or a "
             "learned policy's disjoint training seeds (`evaluate --training-seeds`)"
