@@ -51,6 +51,13 @@ def read_episodes(results: Path) -> list[dict[str, Any]]:
     return episodes
 
 
+CONDITION = ("noise_model", "max_current_mps", "channel")
+"""What a cell's label leaves out and pooled rows must share."""
+
+Part = tuple[Path, dict[str, Any], list[dict[str, Any]]]
+"""A folder's row of a policy's cell, and the cell's runs there."""
+
+
 def read_folders(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The summary and episode rows of one or more evaluation folders, together (policies
     evaluated apart: a learned policy over training seeds, a baseline on its own). A learned
@@ -62,28 +69,24 @@ def read_folders(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[s
             in the same cell other than as disjoint training seeds under one condition.
     """
     episodes: list[dict[str, Any]] = []
-    held: dict[tuple[str, Cell], list[tuple[Path, dict[str, Any], list[dict[str, Any]]]]] = {}
+    held: dict[tuple[str, Cell], list[Part]] = {}
     for folder in folders:
         folder_episodes = read_episodes(folder)
+        runs: dict[tuple[str, Cell], list[dict[str, Any]]] = {}
+        for e in folder_episodes:
+            runs.setdefault(_key(e), []).append(e)
         for row in read_rows(folder):
             key = _key(row)
-            runs = [e for e in folder_episodes if _key(e) == key]
+            part = (folder, row, runs.get(key, []))
             for before in held.get(key, []):
-                _check_poolable(key, (folder, row, runs), before)
-            held.setdefault(key, []).append((folder, row, runs))
+                _check_poolable(key, part, before)
+            held.setdefault(key, []).append(part)
         episodes += folder_episodes
     return [_pooled(parts) for parts in held.values()], episodes
 
 
 def _key(row: dict[str, Any]) -> tuple[str, Cell]:
     return row["policy"], cell_of(row)
-
-
-CONDITION = ("noise_model", "max_current_mps", "channel")
-"""What a cell's label leaves out and pooled rows must share."""
-
-Part = tuple[Path, dict[str, Any], list[dict[str, Any]]]
-"""A folder's row of a policy's cell, and the cell's runs there."""
 
 
 def _check_poolable(key: tuple[str, Cell], new: Part, old: Part) -> None:
