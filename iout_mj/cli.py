@@ -359,6 +359,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_at_least(1),
         help="total PPO steps instead of the config's (its phases scaled to them)",
     )
+    p.add_argument(
+        "--torch-threads",
+        type=int_at_least(1),
+        help="torch threads instead of the config's: 1 to train two runs side by side on two "
+        "cores (README \"Performance\"); floats may round otherwise than with the config's",
+    )
     p.set_defaults(func="cmd_train")
 
     p = sub.add_parser(

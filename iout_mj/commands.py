@@ -406,9 +406,9 @@ def train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
         )
         env = env.replace(scenario=scenario, channel=channel)
         changes["n_nodes"] = None
-    for flag, field in (("seed", "seed"), ("layout", "layout"), ("n_auvs", "n_auvs")):
-        if getattr(args, flag) is not None:
-            changes[field] = getattr(args, flag)
+    for field in ("seed", "layout", "n_auvs", "torch_threads"):  # flag and field named alike
+        if getattr(args, field) is not None:
+            changes[field] = getattr(args, field)
     if args.nodes is not None:
         changes["n_nodes"] = args.nodes
     if args.steps is not None:

@@ -1,5 +1,6 @@
 """The `iout-mj` command line, run as a user would."""
 
+import dataclasses
 import json
 import os
 import re
@@ -155,11 +156,25 @@ def test_flags_apply_only_when_given_and_conflicts_are_errors(tmp_path):
     assert bad.returncode == 2 and "--nodes 7 contradicts" in bad.stderr and "sets 5" in bad.stderr
 
 
+def test_train_overrides_only_what_is_given():
+    from iout_mj.cli import build_parser
+    from iout_mj.commands import train_overrides
+    from iout_mj.training import TrainConfig
+
+    cfg = TrainConfig.load(ROOT / "training/configs/ppo-general-n4-aoi-10m.yaml")
+    assert cfg.torch_threads == 2
+    parse = build_parser().parse_args
+    assert train_overrides(cfg, parse(["train", "x.yaml"])) == cfg
+    threads = train_overrides(cfg, parse(["train", "x.yaml", "--torch-threads", "1"]))
+    assert threads == dataclasses.replace(cfg, torch_threads=1)
+
+
 @pytest.mark.parametrize(
     ("args", "match"),
     [
         (("mission", "--seed", "-1"), "accepted an integer >= 0"),
         (("evaluate", "--episodes", "0"), "accepted an integer >= 1"),
+        (("train", "x.yaml", "--torch-threads", "0"), "accepted an integer >= 1"),
         (("mission", "--width", "8"), "accepted an integer from 16 to 1920"),
         (("figures", "--results", "x", "--label", "ppo"), "--label 'ppo': accepted POLICY=NAME"),
         (("figures", "--runs", "x", "--policies", "ppo"), "--policies need --results DIR"),
