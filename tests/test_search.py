@@ -92,7 +92,7 @@ def test_the_search_delivers_the_most_bits_among_its_tied_candidates():
     """Every slot flown is one whose rollout has the least score and, among equal scores, the
     most bits: the search's own rollouts, recomputed, agree with its choice all mission long."""
     env = _env(n_auvs=2, n_nodes=5)
-    base = read_trained("ppo-general", env)
+    base = read_trained("ppo-general-n2-aoi-2m", env)  # whose candidates tie here (README)
     search = RolloutSearch(base, candidates=16, seed=1)
     env.reset(seed=1)
     search.reset(1)
