@@ -360,7 +360,14 @@ def test_ctrl_c_ends_an_evaluation_and_its_workers_quietly(tmp_path):
         time.sleep(0.1)  # until the workers have finished an episode (the pool is up)
     running = proc.poll() is None
     os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
-    proc.wait(timeout=60)
+    try:
+        proc.wait(timeout=60)
+    except subprocess.TimeoutExpired:  # a hang: say which processes of the group are left
+        left = subprocess.run(
+            ["ps", "-o", "pid,stat,etime,args", "-g", str(proc.pid)], capture_output=True, text=True
+        ).stdout
+        os.killpg(proc.pid, signal.SIGKILL)
+        pytest.fail(f"no exit 60 s after Ctrl-C; left:\n{left}\n{''.join(err_lines)[-500:]}")
     reader.join(timeout=60)
     err = "".join(err_lines)
     assert running, f"the evaluation ended before the interrupt: {err[-500:]}"
