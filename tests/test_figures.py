@@ -3,6 +3,7 @@ the condition; 95 % confidence intervals clipped to the measure's range."""
 
 import json
 import math
+import struct
 
 import pytest
 
@@ -112,3 +113,14 @@ def test_folders_read_together_gather_one_policy_per_n_under_one_label(tmp_path)
         figures.read_results([one, one], {}, None)
     with pytest.raises(UsageError, match="'same' at N=1, K=3 twice"):  # a label that merges a cell
         figures.read_results([one], {"greedy": "same", "a/best": "same"}, None)
+
+
+def test_a_long_policy_name_widens_fig2_instead_of_being_cut(tmp_path):
+    """The legends right of the axes lie inside the image, whatever the names' length."""
+
+    def width_px(name):
+        rows = [r | {"policy": name} if r["policy"] == "ppo" else r for r in GRID]
+        path = figures.vs_k_figure(rows, "mean_aoi", "AoI", "t", math.inf, tmp_path / f"{name}.png")
+        return struct.unpack(">I", path.read_bytes()[16:20])[0]  # the PNG header's width
+
+    assert width_px("ppo-general-n2-aoi-2m+rollout+dock") > width_px("ppo") + 100

@@ -478,7 +478,7 @@ def vs_k_figure(
     ax.set_title(f"{title}\n{condition(rows)}", fontsize=9)
     fig.text(0.01, 0.01, CI_NOTE + (", clipped to [0, 1]" if high == 1.0 else ""), fontsize=7)
     fig.subplots_adjust(left=0.1, right=0.76, top=0.86, bottom=0.16)  # legends at the right
-    fig.savefig(path, dpi=150)
+    fig.savefig(path, dpi=150, bbox_inches="tight", pad_inches=0.1)  # a long name widens it
     plt.close(fig)
     return path
 
